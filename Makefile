@@ -1,0 +1,52 @@
+# dji-gateway: the three commands a user and CI need.
+#   make run    start a local mosquitto (if none is given) and the gateway with simulated devices
+#   make test   set up .venv, install mosquitto if missing, run ruff and the whole pytest suite
+#   make bench  print the benchmark tables (codecs, end-to-end round trips)
+
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: all run test bench lint venv mosquitto clean schema
+
+all: test
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+
+$(STAMP): $(PY) pyproject.toml
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[dev]'
+	@touch $(STAMP)
+
+venv: $(STAMP)
+
+# The tests start their own brokers; they need the binary, not a running service.
+mosquitto:
+	@if command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ]; then :; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing mosquitto with apt-get"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mosquitto >/dev/null; \
+	else \
+		echo "mosquitto is missing: install it (e.g. 'sudo apt-get install mosquitto') and run again" >&2; exit 1; \
+	fi
+
+lint: venv
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+test: venv mosquitto lint
+	$(PY) -m pytest -q
+
+bench: venv mosquitto
+	$(PY) bench/run.py
+
+run: venv mosquitto
+	$(PY) -m gateway.devrun $(ARGS)
+
+schema: venv
+	$(VENV)/bin/dji-gateway schema export
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis build *.egg-info

@@ -1,0 +1,16 @@
+"""Test-session fixtures shared by every suite (hypothesis profile; brokers come in later modules)."""
+
+from __future__ import annotations
+
+import os
+
+from hypothesis import HealthCheck, settings
+
+settings.register_profile(
+    "default",
+    deadline=None,
+    max_examples=200,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.register_profile("ci", parent=settings.get_profile("default"), max_examples=200, derandomize=True)
+settings.load_profile("ci" if os.environ.get("CI") else "default")
