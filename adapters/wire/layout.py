@@ -207,7 +207,9 @@ class Layout:
             lo, hi = (f.minimum, f.maximum)
             if f.is_float:
                 base = 1.5 * k if lo is None else float(lo) + (float(hi or lo) - float(lo)) / 3
-                sample: float | int = struct.unpack("<f", struct.pack("<f", base))[0] if f.code == "f" else base
+                sample: float | int = (
+                    struct.unpack("<f", struct.pack("<f", base))[0] if f.code == "f" else base
+                )
             else:
                 tlo, thi = _INT_RANGES[f.code]
                 lo_i = tlo if lo is None else int(lo)

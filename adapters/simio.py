@@ -1,0 +1,196 @@
+"""Byte-stream endpoints for the device simulators: a pseudo-terminal or a loopback TCP port.
+
+A simulator is a :class:`StreamDevice` (bytes in → bytes out, plus a periodic ``tick``); this
+module gives it a real OS byte boundary so the gateway talks to it through pyserial (a pty path or
+``socket://127.0.0.1:PORT``) or python-can's ``slcan`` interface exactly as it would to hardware.
+Loopback only. One client at a time on TCP (a serial port has one host too); a reconnecting client
+replaces the previous one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import select
+import socket
+import threading
+import time
+import tty
+from typing import Protocol
+
+log = logging.getLogger(__name__)
+
+__all__ = ["PtyEndpoint", "StreamDevice", "TcpEndpoint"]
+
+
+class StreamDevice(Protocol):
+    def on_bytes(self, data: bytes, now: float) -> bytes:
+        """Bytes from the host; returns bytes to send back at once."""
+        ...
+
+    def tick(self, now: float) -> bytes:
+        """Called every ``tick_interval``; returns unsolicited bytes (pushes, telemetry)."""
+        ...
+
+
+class _Endpoint:
+    def __init__(self, device: StreamDevice, tick_interval: float = 0.01) -> None:
+        self.device = device
+        self.tick_interval = tick_interval
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+        self.paused = False  # when True the device neither reads nor answers (a "silent" device)
+
+    def start(self) -> _Endpoint:
+        self._thread = threading.Thread(target=self._run, name=type(self).__name__, daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        self._close()
+
+    def __enter__(self) -> _Endpoint:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _run(self) -> None:
+        next_tick = time.monotonic()
+        while not self._stop.is_set():
+            fd = self._fd()
+            timeout = max(0.0, next_tick - time.monotonic())
+            readable: list[int] = []
+            if fd is not None:
+                try:
+                    readable, _, _ = select.select([fd], [], [], timeout)
+                except (OSError, ValueError):
+                    self._drop_client()
+                    continue
+            else:
+                self._accept(timeout)
+            now = time.monotonic()
+            if readable:
+                data = self._read()
+                if data is None:
+                    self._drop_client()
+                elif data and not self.paused:
+                    out = self.device.on_bytes(data, now)
+                    if out:
+                        self._write(out)
+            if now >= next_tick:
+                next_tick = now + self.tick_interval
+                if not self.paused:
+                    out = self.device.tick(now)
+                    if out and self._fd() is not None:
+                        self._write(out)
+
+    # subclass hooks
+    def _fd(self) -> int | None:
+        raise NotImplementedError
+
+    def _read(self) -> bytes | None:
+        raise NotImplementedError
+
+    def _write(self, data: bytes) -> None:
+        raise NotImplementedError
+
+    def _accept(self, timeout: float) -> None:
+        time.sleep(timeout)
+
+    def _drop_client(self) -> None:
+        pass
+
+    def _close(self) -> None:
+        pass
+
+
+class PtyEndpoint(_Endpoint):
+    """The device holds the master side; the host opens :attr:`path` (the slave) with pyserial."""
+
+    def __init__(self, device: StreamDevice, tick_interval: float = 0.01) -> None:
+        super().__init__(device, tick_interval)
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)  # no echo, no CR/LF translation: a clean 8-bit line
+        tty.setraw(self._master)
+        self.path = os.ttyname(self._slave)
+
+    def _fd(self) -> int | None:
+        return self._master
+
+    def _read(self) -> bytes | None:
+        try:
+            return os.read(self._master, 4096)
+        except BlockingIOError:
+            return b""
+        except OSError:
+            return b""  # EIO when no host has the slave open: keep waiting
+
+    def _write(self, data: bytes) -> None:
+        with self._lock:
+            try:
+                os.write(self._master, data)
+            except OSError as exc:
+                log.debug("pty write failed: %s", exc)
+
+    def _close(self) -> None:
+        for fd in (self._master, self._slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+class TcpEndpoint(_Endpoint):
+    """Listens on 127.0.0.1:``port`` (0 = any free port); the host opens :attr:`url`."""
+
+    def __init__(self, device: StreamDevice, port: int = 0, tick_interval: float = 0.01) -> None:
+        super().__init__(device, tick_interval)
+        self._server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self._server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self._server.bind(("127.0.0.1", port))
+        self._server.listen(1)
+        self.port = int(self._server.getsockname()[1])
+        self.url = f"socket://127.0.0.1:{self.port}"
+        self._client: socket.socket | None = None
+
+    def _fd(self) -> int | None:
+        return self._client.fileno() if self._client is not None else None
+
+    def _accept(self, timeout: float) -> None:
+        ready, _, _ = select.select([self._server], [], [], timeout)
+        if ready:
+            client, _ = self._server.accept()
+            client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._client = client
+
+    def _read(self) -> bytes | None:
+        assert self._client is not None
+        try:
+            data = self._client.recv(4096)
+        except OSError:
+            return None
+        return data or None
+
+    def _write(self, data: bytes) -> None:
+        with self._lock:
+            if self._client is None:
+                return
+            try:
+                self._client.sendall(data)
+            except OSError:
+                self._drop_client()
+
+    def _drop_client(self) -> None:
+        if self._client is not None:
+            with contextlib.suppress(OSError):
+                self._client.close()
+            self._client = None
+
+    def _close(self) -> None:
+        self._drop_client()
+        with contextlib.suppress(OSError):
+            self._server.close()

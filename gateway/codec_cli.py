@@ -1,0 +1,147 @@
+"""``dji-gateway decode`` / ``encode``: the byte-level tools an integrator debugs a link with.
+
+Owns argument parsing of hex and ``field=value`` input and JSON-lines output; every protocol detail
+comes from ``adapters/<family>/describe.py``. Must not know any frame layout itself.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import sys
+from collections.abc import Iterable, Sequence
+from types import ModuleType
+from typing import Any, TextIO
+
+FAMILIES = ("rsdk", "robomaster", "osdk")
+
+
+def _describe(family: str) -> ModuleType:
+    return importlib.import_module(f"adapters.{family}.describe")
+
+
+def _hex_to_bytes(chunks: Iterable[str]) -> bytes:
+    text = "".join(chunks)
+    cleaned = "".join(text.replace("0x", " ").replace("0X", " ").replace(",", " ").split())
+    if len(cleaned) % 2:
+        raise ValueError("odd number of hex digits")
+    return bytes.fromhex(cleaned)
+
+
+def _read_input(args: Sequence[str], stdin: TextIO) -> str:
+    if not args or list(args) == ["-"]:
+        return stdin.read()
+    return " ".join(args)
+
+
+def _looks_like_candump(text: str) -> bool:
+    return "#" in text or "[" in text
+
+
+def _options(ns: argparse.Namespace) -> dict[str, Any]:
+    opts: dict[str, Any] = {}
+    if getattr(ns, "season", None):
+        opts["season"] = ns.season
+    if getattr(ns, "firmware", None):
+        opts["firmware"] = ns.firmware
+    if getattr(ns, "control_cmd_id", None) is not None:
+        opts["control_cmd_id"] = ns.control_cmd_id
+    return opts
+
+
+def json_safe(value: Any) -> Any:
+    """JSON has no NaN or infinity; a float register on the wire can hold them, so they print as strings."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return repr(value)
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    return value
+
+
+def run_decode(ns: argparse.Namespace, stdin: TextIO, stdout: TextIO) -> int:
+    mod = _describe(ns.protocol)
+    text = _read_input(ns.hex, stdin)
+    if ns.protocol == "rsdk" and _looks_like_candump(text):
+        records = mod.decode_can_lines(text)
+    else:
+        try:
+            data = _hex_to_bytes(text.split())
+        except ValueError as exc:
+            print(
+                json.dumps({"protocol": ns.protocol, "valid": False, "error": f"bad hex input: {exc}"}),
+                file=stdout,
+            )
+            return 2
+        records = mod.decode_bytes(data, **_options(ns))
+    for rec in records:
+        print(json.dumps(json_safe(rec), separators=(",", ":"), allow_nan=False), file=stdout)
+    return 0
+
+
+def _parse_value(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def parse_assignments(items: Sequence[str]) -> dict[str, Any]:
+    fields: dict[str, Any] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            raise ValueError(f"expected field=value, got {item!r}")
+        fields[name] = _parse_value(value)
+    return fields
+
+
+def run_encode(ns: argparse.Namespace, stdout: TextIO, stderr: TextIO) -> int:
+    mod = _describe(ns.protocol)
+    try:
+        fields = parse_assignments(ns.fields)
+        if ns.protocol == "rsdk" and ns.can:
+            for arb_id, payload in mod.encode_can(ns.command, ns.seq, fields, **_options(ns)):
+                print(f"{arb_id:03X}#{payload.hex().upper()}", file=stdout)
+            return 0
+        frame = mod.encode_command(ns.command, ns.seq, fields, **_options(ns))
+    except ValueError as exc:
+        print(f"error: {exc}", file=stderr)
+        return 2
+    print(" ".join(f"{b:02X}" for b in frame), file=stdout)
+    return 0
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    dec = sub.add_parser(
+        "decode",
+        help="decode frames from hex (arguments or stdin) into JSON lines",
+        description="Decode hex (or, for rsdk, candump lines) into one JSON object per frame.",
+    )
+    dec.add_argument("protocol", choices=FAMILIES)
+    dec.add_argument("hex", nargs="*", help="hex bytes; '-' or nothing reads stdin")
+    _family_options(dec)
+    dec.set_defaults(handler=lambda ns: run_decode(ns, sys.stdin, sys.stdout))
+
+    enc = sub.add_parser("encode", help="encode one command as a frame (hex)")
+    enc.add_argument("protocol", choices=FAMILIES)
+    enc.add_argument("command", help="command name from the protocol's table")
+    enc.add_argument("--seq", type=lambda s: int(s, 0), default=0)
+    enc.add_argument("--can", action="store_true", help="rsdk: print the CAN split as ID#DATA lines")
+    enc.add_argument("fields", nargs="*", help="field=value (JSON values; hex strings for bytes)")
+    _family_options(enc)
+    enc.set_defaults(handler=lambda ns: run_encode(ns, sys.stdout, sys.stderr))
+
+
+def _family_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--season", choices=("2024", "2025", "2026"), help="robomaster: referee protocol season")
+    p.add_argument("--firmware", choices=("new", "m100"), help="osdk: flight controller generation")
+    p.add_argument(
+        "--control-cmd-id",
+        type=lambda s: int(s, 0),
+        default=None,
+        help="robomaster: team-defined control cmd_id",
+    )

@@ -1,0 +1,144 @@
+"""Start a private mosquitto on a free loopback port: for ``make run`` and for the test suite.
+
+Owns the mosquitto process, its config file and its readiness check. Knows nothing of the Cloud
+API. Never binds anything but loopback, and never reuses a broker someone else started.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+__all__ = ["LocalBroker", "find_mosquitto", "free_port", "port_open"]
+
+
+def find_mosquitto() -> str:
+    """Path of the mosquitto binary (Debian installs it in /usr/sbin, often not on PATH)."""
+    found = shutil.which("mosquitto") or next(
+        (p for p in ("/usr/sbin/mosquitto", "/usr/local/sbin/mosquitto") if os.access(p, os.X_OK)), None
+    )
+    if not found:
+        raise FileNotFoundError("mosquitto binary not found: install it (apt-get install mosquitto)")
+    return found
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def port_open(host: str, port: int, timeout: float = 0.2) -> bool:
+    with contextlib.suppress(OSError), socket.create_connection((host, port), timeout=timeout):
+        return True
+    return False
+
+
+class LocalBroker:
+    """A mosquitto child process on 127.0.0.1:port, restartable on the same port (for outage tests).
+
+    ``extra_config`` lines are appended to the generated config (password_file, acl_file, TLS …);
+    ``listener_lines`` replace the default plain listener."""
+
+    def __init__(
+        self,
+        port: int | None = None,
+        *,
+        extra_config: str = "",
+        listener_lines: str | None = None,
+        allow_anonymous: bool = True,
+        workdir: Path | None = None,
+    ) -> None:
+        self.host = "127.0.0.1"
+        self.port = port or free_port()
+        self._dir = Path(workdir) if workdir else Path(tempfile.mkdtemp(prefix="djigw-mosq-"))
+        self._dir.mkdir(parents=True, exist_ok=True)
+        listener = listener_lines or f"listener {self.port} {self.host}"
+        self.config_path = self._dir / "mosquitto.conf"
+        self.log_path = self._dir / "mosquitto.log"
+        self.config_path.write_text(
+            "\n".join(
+                [
+                    "per_listener_settings false",
+                    listener,
+                    f"allow_anonymous {'true' if allow_anonymous else 'false'}",
+                    "persistence false",
+                    "set_tcp_nodelay true",
+                    "max_queued_messages 10000",
+                    f"log_dest file {self.log_path}",
+                    "log_type error",
+                    "log_type warning",
+                    "log_type notice",
+                    extra_config,
+                    "",
+                ]
+            )
+        )
+        self._proc: subprocess.Popen[bytes] | None = None
+
+    @property
+    def url(self) -> str:
+        return f"mqtt://{self.host}:{self.port}"
+
+    @property
+    def running(self) -> bool:
+        return self._proc is not None and self._proc.poll() is None
+
+    def start(self, timeout: float = 10.0) -> LocalBroker:
+        if self.running:
+            return self
+        self._proc = subprocess.Popen(
+            [find_mosquitto(), "-c", str(self.config_path)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            start_new_session=True,
+        )
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self._proc.poll() is not None:
+                err = self._proc.stderr.read().decode(errors="replace") if self._proc.stderr else ""
+                log = self.log_path.read_text() if self.log_path.exists() else ""
+                raise RuntimeError(
+                    f"mosquitto exited with {self._proc.returncode}: {err.strip()} {log[-500:]}"
+                )
+            if port_open(self.host, self.port):
+                return self
+            time.sleep(0.02)
+        self.stop()
+        raise TimeoutError(f"mosquitto did not listen on {self.host}:{self.port} within {timeout}s")
+
+    def stop(self, *, kill: bool = False) -> None:
+        """Stop the broker; ``kill`` sends SIGKILL (a crash) instead of SIGTERM."""
+        if self._proc is None:
+            return
+        if self._proc.poll() is None:
+            self._proc.send_signal(signal.SIGKILL if kill else signal.SIGTERM)
+            try:
+                self._proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self._proc.kill()
+                self._proc.wait(timeout=5)
+        if self._proc.stderr:
+            self._proc.stderr.close()
+        self._proc = None
+        # wait until the port is free again so a restart can bind it
+        deadline = time.monotonic() + 5
+        while port_open(self.host, self.port) and time.monotonic() < deadline:
+            time.sleep(0.02)
+
+    def restart(self) -> LocalBroker:
+        self.stop()
+        return self.start()
+
+    def __enter__(self) -> LocalBroker:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

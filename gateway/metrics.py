@@ -1,0 +1,54 @@
+"""In-process counters, gauges and latency samples for the gateway.
+
+Owns the numbers only (no HTTP, no Prometheus types) so every layer can count without a
+dependency; an exporter reads :meth:`Metrics.snapshot`. Updated from the event loop and, for a
+few counters, from library threads: ``+=`` on a dict entry under the GIL is enough for counters
+that only ever grow, and nothing reads them for control decisions.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict, deque
+from dataclasses import dataclass, field
+
+Labels = tuple[tuple[str, str], ...]
+
+
+def _labels(kw: dict[str, object]) -> Labels:
+    return tuple(sorted((k, str(v)) for k, v in kw.items()))
+
+
+@dataclass
+class Metrics:
+    counters: dict[tuple[str, Labels], float] = field(default_factory=lambda: defaultdict(float))
+    gauges: dict[tuple[str, Labels], float] = field(default_factory=dict)
+    samples: dict[str, deque[float]] = field(default_factory=dict)
+    sample_window: int = 4096
+
+    def inc(self, name: str, amount: float = 1.0, **labels: object) -> None:
+        self.counters[(name, _labels(labels))] += amount
+
+    def set(self, name: str, value: float, **labels: object) -> None:
+        self.gauges[(name, _labels(labels))] = value
+
+    def observe(self, name: str, value: float) -> None:
+        window = self.samples.get(name)
+        if window is None:
+            window = self.samples[name] = deque(maxlen=self.sample_window)
+        window.append(value)
+
+    def count(self, name: str, **labels: object) -> float:
+        """Sum of a counter over every label set that includes ``labels``."""
+        want = set(_labels(labels))
+        return sum(v for (n, lab), v in self.counters.items() if n == name and want <= set(lab))
+
+    def gauge(self, name: str, **labels: object) -> float | None:
+        return self.gauges.get((name, _labels(labels)))
+
+    def snapshot(self) -> dict[str, object]:
+        return {
+            "counters": [
+                {"name": n, "labels": dict(lab), "value": v} for (n, lab), v in self.counters.items()
+            ],
+            "gauges": [{"name": n, "labels": dict(lab), "value": v} for (n, lab), v in self.gauges.items()],
+        }

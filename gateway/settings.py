@@ -1,0 +1,213 @@
+"""Gateway settings: one pydantic-settings class, read once at start-up and passed down.
+
+Sources, strongest first: ``DJIGW_``-prefixed environment variables (nested with ``__``, e.g.
+``DJIGW_BROKER__PASSWORD``), then the TOML file given with ``--config``. Secrets have no defaults
+and are ``SecretStr`` so they never reach a log line or an error message. No import-time singleton.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+from urllib.parse import urlsplit
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    SecretStr,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
+
+__all__ = [
+    "BrokerSettings",
+    "ConfigError",
+    "DispatcherSettings",
+    "GatewaySettings",
+    "ProductSettings",
+    "RsdkDeviceSettings",
+    "load_settings",
+]
+
+_STRICT = ConfigDict(extra="forbid", frozen=True)
+
+
+class ConfigError(ValueError):
+    """A configuration that cannot run; the message is one line naming the field."""
+
+
+class ProductSettings(BaseModel):
+    """What ``update_topo`` says about a device: Cloud API product enumeration (domain/type/sub_type)."""
+
+    model_config = _STRICT
+    domain: str = "3"
+    type: int = 1001
+    sub_type: int = 0
+    thing_version: str = "1.1.2"
+    device_secret: SecretStr | None = None
+
+
+class BrokerSettings(BaseModel):
+    model_config = _STRICT
+    url: str = Field(
+        "mqtt://127.0.0.1:1883", description="mqtt://, mqtts://, ws:// or wss:// host:port[/path]"
+    )
+    username: str | None = None
+    password: SecretStr | None = None
+    client_id: str | None = Field(None, description="default: djigw-<gateway_sn>")
+    protocol: Literal["5", "3.1.1"] = "5"
+    keepalive: int = Field(30, ge=5, le=3600)
+    ca_file: Path | None = None
+    cert_file: Path | None = None
+    key_file: Path | None = None
+    tls_hostname_check: bool = True
+    session_expiry: int = Field(
+        600, ge=0, description="MQTT 5 session expiry (s): QoS 1 requests survive a reconnect"
+    )
+    reconnect_min: float = Field(0.5, gt=0, le=60)
+    reconnect_max: float = Field(30.0, gt=0, le=600)
+    inbound_queue: int = Field(
+        1000, ge=10, description="received messages held for the loop; more are dropped"
+    )
+    max_payload: int = Field(65536, ge=1024, description="inbound payloads larger than this are refused")
+
+    @field_validator("url")
+    @classmethod
+    def _url(cls, v: str) -> str:
+        parts = urlsplit(v)
+        if parts.scheme not in {"mqtt", "mqtts", "ws", "wss", "tcp", "ssl"}:
+            raise ValueError("scheme must be mqtt://, mqtts://, ws:// or wss://")
+        if not parts.hostname:
+            raise ValueError("missing host")
+        return v
+
+    @property
+    def transport(self) -> Literal["tcp", "websockets"]:
+        return "websockets" if urlsplit(self.url).scheme in {"ws", "wss"} else "tcp"
+
+    @property
+    def tls(self) -> bool:
+        return urlsplit(self.url).scheme in {"mqtts", "wss", "ssl"}
+
+    @property
+    def host(self) -> str:
+        return urlsplit(self.url).hostname or ""
+
+    @property
+    def port(self) -> int:
+        parts = urlsplit(self.url)
+        if parts.port:
+            return parts.port
+        return {"mqtt": 1883, "tcp": 1883, "mqtts": 8883, "ssl": 8883, "ws": 80, "wss": 443}[parts.scheme]
+
+    @property
+    def ws_path(self) -> str:
+        return urlsplit(self.url).path or "/mqtt"
+
+
+class DispatcherSettings(BaseModel):
+    model_config = _STRICT
+    request_timeout: float = Field(
+        1.0, gt=0, le=2.5, description="device deadline; the reply is always < 3 s"
+    )
+    reply_cache_seconds: float = Field(30.0, ge=0)
+    require_authority: bool = Field(
+        True, description="camera/gimbal/flight methods need a prior *_authority_grab"
+    )
+    event_retries: int = Field(3, ge=0, le=10)
+    event_retry_interval: float = Field(3.0, gt=0)
+    max_pending: int = Field(256, ge=1, description="requests in flight at once; more get 314000 busy")
+
+
+class RsdkDeviceSettings(BaseModel):
+    """A DJI R SDK gimbal (RS 2 / RS 3 / RS 4) on a CAN bus, exposed as a camera payload."""
+
+    model_config = _STRICT
+    type: Literal["rsdk"] = "rsdk"
+    sn: str = Field(min_length=1, max_length=64)
+    payload_index: str = Field("1001-0-0", pattern=r"^\d+-\d+-\d+$")
+    product: ProductSettings = ProductSettings(domain="1", type=1001, sub_type=0)
+    interface: str = Field("virtual", description="python-can interface: socketcan, slcan, pcan, virtual, …")
+    channel: str = Field("djigw", description="can0, /dev/ttyACM0, socket://127.0.0.1:PORT, …")
+    bitrate: int = 1_000_000
+    tx_id: int = 0x223
+    rx_id: int = 0x222
+    osd_period: float | None = Field(None, gt=0, description="default: the gateway's osd_period")
+    silence_timeout: float = Field(2.0, gt=0, description="no push or reply for this long → offline")
+    fov_h_deg: float = Field(70.0, gt=0, lt=180, description="camera field of view used by camera_aim")
+    fov_v_deg: float = Field(45.0, gt=0, lt=180)
+    drag_hold: float = Field(0.5, gt=0, description="a drag lasts this long after its last message")
+    drag_rate_hz: float = Field(10.0, ge=10, le=50, description="speed control refresh while dragging")
+    max_speed_dps: float = Field(360.0, gt=0, le=360)
+
+
+DeviceSettings = Annotated[RsdkDeviceSettings, Field(discriminator="type")]
+
+
+class GatewaySettings(BaseSettings):
+    model_config = SettingsConfigDict(
+        env_prefix="DJIGW_", env_nested_delimiter="__", extra="forbid", frozen=True, validate_default=True
+    )
+
+    gateway_sn: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9._-]+$")
+    product: ProductSettings = ProductSettings()
+    broker: BrokerSettings = BrokerSettings()
+    dispatcher: DispatcherSettings = DispatcherSettings()
+    devices: list[DeviceSettings] = Field(default_factory=list)
+    osd_period: float = Field(2.0, gt=0, description="periodic osd (0.5 Hz by default, per device override)")
+    log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+    log_json: bool = False
+
+    @model_validator(mode="after")
+    def _unique(self) -> GatewaySettings:
+        sns = [d.sn for d in self.devices]
+        if len(set(sns)) != len(sns):
+            raise ValueError("device serial numbers must be unique")
+        idx = [d.payload_index for d in self.devices]
+        if len(set(idx)) != len(idx):
+            raise ValueError("payload_index values must be unique")
+        return self
+
+    @classmethod
+    def settings_customise_sources(
+        cls,
+        settings_cls: type[BaseSettings],
+        init_settings: PydanticBaseSettingsSource,
+        env_settings: PydanticBaseSettingsSource,
+        dotenv_settings: PydanticBaseSettingsSource,
+        file_secret_settings: PydanticBaseSettingsSource,
+    ) -> tuple[PydanticBaseSettingsSource, ...]:
+        # environment beats the file (init kwargs carry the TOML document)
+        return (env_settings, init_settings)
+
+
+def _one_line(exc: ValidationError) -> str:
+    err = exc.errors()[0]
+    where = ".".join(str(p) for p in err["loc"]) or "(top level)"
+    more = f" (+{exc.error_count() - 1} more)" if exc.error_count() > 1 else ""
+    return f"config error at {where}: {err['msg']}{more}"
+
+
+def load_settings(path: Path | str | None = None, **overrides: Any) -> GatewaySettings:
+    """Read the TOML file (if any), apply environment and ``overrides``; one clear line on error."""
+    doc: dict[str, Any] = {}
+    if path is not None:
+        try:
+            doc = tomllib.loads(Path(path).read_text())
+        except FileNotFoundError:
+            raise ConfigError(f"config file not found: {path}") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"config file {path} is not valid TOML: {exc}") from None
+    for key, value in overrides.items():
+        if isinstance(value, dict) and isinstance(doc.get(key), dict):
+            doc[key] = {**doc[key], **value}
+        else:
+            doc[key] = value
+    try:
+        return GatewaySettings(**doc)
+    except ValidationError as exc:
+        raise ConfigError(_one_line(exc)) from None

@@ -1,0 +1,70 @@
+"""Sans-I/O is a rule, not a hope: protocol and command modules import the standard library and
+``adapters.wire`` only (no python-can, pyserial, paho, pydantic, sockets or threads)."""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+FORBIDDEN_STDLIB = {"socket", "threading", "asyncio", "select", "selectors", "subprocess", "time"}
+
+
+def _sans_io_modules() -> list[Path]:
+    files = list((ROOT / "adapters" / "wire").glob("*.py"))
+    for pattern in ("protocol.py", "commands.py", "telemetry.py"):
+        files += (ROOT / "adapters").glob(f"*/{pattern}")
+    return sorted(files)
+
+
+def _imports(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:  # relative import: stays inside its own package
+                pkg = ".".join(path.relative_to(ROOT).with_suffix("").parts[: -node.level])
+                names.add(f"{pkg}.{node.module}" if node.module else pkg)
+            elif node.module:
+                names.add(node.module)
+    return names
+
+
+def test_there_are_modules_to_check() -> None:
+    assert len(_sans_io_modules()) >= 4
+
+
+def _offenders(paths: list[Path]) -> list[str]:
+    offenders: list[str] = []
+    for path in paths:
+        family = path.parent.name
+        for name in _imports(path):
+            top = name.split(".")[0]
+            if name.startswith("adapters.wire") or top == "__future__":
+                continue
+            if name.startswith(f"adapters.{family}") and path.parent.name != "wire":
+                own = ROOT / Path(*name.split("."))
+                # another sans-I/O module of the same family is fine; anything else (a link, a sim) is not
+                if own.with_suffix(".py") in _sans_io_modules():
+                    continue
+            if top in sys.stdlib_module_names and top not in FORBIDDEN_STDLIB:
+                continue
+            offenders.append(f"{path.relative_to(ROOT)} imports {name}")
+    return offenders
+
+
+def test_protocol_modules_import_only_stdlib_and_wire() -> None:
+    assert _offenders(_sans_io_modules()) == []
+
+
+def test_the_rule_catches_an_offender(tmp_path: Path) -> None:
+    bad = ROOT / "adapters" / "wire" / "_probe_offender.py"
+    bad.write_text("import can\nimport socket\nfrom adapters.rsdk import link\n")
+    try:
+        found = _offenders([bad])
+    finally:
+        bad.unlink()
+    assert len(found) == 3
