@@ -1,0 +1,168 @@
+"""CLI contract for the R SDK family: decode bytes or candump text to JSON-able dicts, encode commands.
+
+Used by ``gateway/cli.py`` (``decode``/``encode``); everything derives from the command table.
+Replies are matched to the commands seen earlier in the same input by SEQ, so a legacy reply (no
+CmdSet/CmdID) is decoded against the command it answers; ``reply_to=<command name>`` covers replies
+whose command is not in the input. Must not know MQTT, the gateway or any bus library.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any
+
+from adapters.rsdk import commands as cmds
+from adapters.rsdk.can import GIMBAL_TX_ID, HOST_TX_ID, Reassembler, segment
+from adapters.rsdk.candump import parse_lines
+from adapters.rsdk.protocol import BadFrame, Decoder, Frame
+
+__all__ = ["COMMANDS", "decode_bytes", "decode_can_lines", "encode_can", "encode_command"]
+
+COMMANDS: list[str] = list(cmds.COMMANDS)
+
+# Human-readable companions of some wire values, by field name (shown under "text").
+_TEXTS: dict[str, Callable[[int], str]] = {
+    "return_code": cmds.return_code_text,
+    "version": cmds.version_text,
+    "device_id": lambda v: cmds.DEVICE_IDS.get(v, f"device 0x{v:08X}"),
+}
+
+
+def _check_options(options: Mapping[str, Any], allowed: Iterable[str]) -> None:
+    allowed = set(allowed)
+    unknown = set(options) - allowed
+    if unknown:
+        raise ValueError(f"unknown option(s) {sorted(unknown)}; valid: {sorted(allowed)}")
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, bytes | bytearray):
+        return bytes(value).hex()
+    if isinstance(value, Mapping):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    return value
+
+
+class _Session:
+    """Decodes frames of one input in order, remembering sent commands by SEQ for their replies."""
+
+    def __init__(self, reply_to: str | None) -> None:
+        self.reply_to = cmds.lookup(reply_to) if reply_to is not None else None
+        self.sent: dict[int, tuple[int, int, str]] = {}
+
+    def describe(self, item: Frame | BadFrame) -> dict[str, Any]:
+        if isinstance(item, BadFrame):
+            return {
+                "protocol": "rsdk",
+                "valid": False,
+                "seq": None,
+                "command": None,
+                "cmd_set": None,
+                "cmd_id": None,
+                "is_reply": None,
+                "fields": None,
+                "error": item.reason,
+                "raw": item.raw.hex(),
+            }
+        out: dict[str, Any] = {
+            "protocol": "rsdk",
+            "valid": True,
+            "seq": item.seq,
+            "command": None,
+            "cmd_set": item.cmd_set,
+            "cmd_id": item.cmd_id,
+            "is_reply": item.is_reply,
+            "cmd_type": item.cmd_type,
+            "fields": None,
+            "error": None,
+        }
+        try:
+            msg = self._decode(item)
+        except cmds.CommandError as e:
+            out["error"] = str(e)
+            out["payload"] = item.data.hex()
+            return out
+        out.update(command=msg.name, cmd_set=msg.cmd_set, cmd_id=msg.cmd_id, fields=_jsonable(msg.fields))
+        if item.is_reply:
+            out["legacy"] = msg.legacy
+        texts = {k: f(v) for k, f in _TEXTS.items() if isinstance(v := msg.fields.get(k), int)}
+        if texts:
+            out["text"] = texts
+        return out
+
+    def _decode(self, frame: Frame) -> cmds.Message:
+        if not frame.is_reply:
+            msg = cmds.decode_message(frame)
+            self.sent[frame.seq] = (msg.cmd_set, msg.cmd_id, msg.name)
+            return msg
+        sent = self.sent.get(frame.seq)
+        if sent is not None:
+            return cmds.decode_reply(frame, *sent)
+        if self.reply_to is not None:
+            spec = self.reply_to
+            return cmds.decode_reply(frame, spec.cmd_set, spec.cmd_id, spec.name)
+        return cmds.decode_message(frame)
+
+
+def decode_bytes(data: bytes, **options: Any) -> list[dict[str, Any]]:
+    """One dict per frame or BadFrame, in order. Options: ``can`` (data is candump text, see
+    :func:`decode_can_lines`), ``reply_to`` (command name for replies whose command is not in the input)."""
+    _check_options(options, {"can", "reply_to", "host_id", "gimbal_id"})
+    if options.get("can"):
+        rest = {k: v for k, v in options.items() if k != "can"}
+        return decode_can_lines(bytes(data).decode("utf-8", errors="replace"), **rest)
+    _check_options(options, {"can", "reply_to"})
+    session = _Session(options.get("reply_to"))
+    decoder = Decoder()
+    items = decoder.feed(data) + decoder.flush()
+    return [session.describe(item) for item in items]
+
+
+def decode_can_lines(text: str, **options: Any) -> list[dict[str, Any]]:
+    """Decode candump text (screen or log format). Frames on ``gimbal_id`` (0x222) and ``host_id``
+    (0x223) are reassembled per id; each dict also has ``can_id``. Other ids are skipped."""
+    _check_options(options, {"reply_to", "host_id", "gimbal_id"})
+    session = _Session(options.get("reply_to"))
+    ids = (int(options.get("host_id", HOST_TX_ID)), int(options.get("gimbal_id", GIMBAL_TX_ID)))
+    reassemblers = {i: Reassembler(i) for i in ids}
+    out: list[dict[str, Any]] = []
+
+    def emit(can_id: int, items: list[Frame | BadFrame]) -> None:
+        for item in items:
+            d = session.describe(item)
+            d["can_id"] = can_id
+            out.append(d)
+
+    for arb_id, payload in parse_lines(text):
+        r = reassemblers.get(arb_id)
+        if r is not None:
+            emit(arb_id, r.feed(arb_id, payload))
+    for can_id, r in reassemblers.items():
+        emit(can_id, r.flush())
+    return out
+
+
+def encode_command(command: str, seq: int, fields: dict[str, Any], **options: Any) -> bytes:
+    """Frame bytes for a table command. Options: ``reply`` (encode its reply, as the gimbal would),
+    ``legacy`` (that reply in the old format), ``cmd_type`` (override the CmdType reply type).
+    Unknown command or field -> ValueError listing the valid names."""
+    _check_options(options, {"reply", "legacy", "cmd_type"})
+    return cmds.encode_command(
+        command,
+        seq,
+        fields,
+        reply=bool(options.get("reply", False)),
+        legacy=bool(options.get("legacy", False)),
+        cmd_type=options.get("cmd_type"),
+    )
+
+
+def encode_can(command: str, seq: int, fields: dict[str, Any], **options: Any) -> list[tuple[int, bytes]]:
+    """The CAN frames for :func:`encode_command`; ``arb_id`` defaults to 0x223 for commands and 0x222
+    for replies (``reply=True``)."""
+    _check_options(options, {"reply", "legacy", "cmd_type", "arb_id"})
+    rest = {k: v for k, v in options.items() if k != "arb_id"}
+    default_id = GIMBAL_TX_ID if options.get("reply") else HOST_TX_ID
+    return segment(encode_command(command, seq, fields, **rest), int(options.get("arb_id", default_id)))
