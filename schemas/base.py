@@ -1,0 +1,168 @@
+"""Base classes and constrained types shared by every Cloud API model.
+
+Owns the unknown-field policy, the strictness of numbers, the secret masking and the "absent, not null"
+serialisation rule. Knows nothing about topics, methods, devices or bytes.
+
+Policy (the contract's rules, applied through these bases and types):
+
+- ``InboundModel`` (what the gateway receives): unknown keys are ignored (a newer cloud may add fields),
+  known keys are validated strictly.
+- ``OutboundModel`` (what the gateway sends): unknown keys are an error, so a message never carries a field
+  the contract does not define.
+- Numbers are strict: a JSON string ``"5"``, a boolean or ``5.5`` for an int is rejected, never coerced;
+  floats accept JSON integers (``100`` for ``100.0``) and reject NaN and infinities. Booleans are strict
+  (``0``/``1`` are not booleans). Integer enums accept their integer values only (not ``"1"``, ``true`` or
+  ``1.0``). A wrong type in a speed or a height must never move a device.
+- Optional fields that are absent serialise as absent, never as ``null``.
+- Secrets (``SecretStr``) serialise masked unless the dump is given ``context={"reveal_secrets": True}``.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from typing import Annotated, Any, TypeVar
+
+from pydantic import (
+    AllowInfNan,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    SecretStr,
+    SerializationInfo,
+    SerializerFunctionWrapHandler,
+    Strict,
+    StringConstraints,
+    WrapSerializer,
+    model_serializer,
+)
+
+#: Prefix that marks every field and method this project adds to the Cloud API (extension methods are
+#: ``x_<family>_<name>``, extension properties ``x_<name>``). DJI never uses it, so an extension cannot
+#: collide with a future Cloud API name, and a reader of a raw message sees at once what is not DJI's.
+EXTENSION_PREFIX = "x_"
+
+
+class ContractModel(BaseModel):
+    """Common root: frozen values, and optional fields that are ``None`` are left out of every dump."""
+
+    model_config = ConfigDict(frozen=True, populate_by_name=True, validate_default=False)
+
+    @model_serializer(mode="wrap")
+    def _drop_absent(self, handler: SerializerFunctionWrapHandler) -> Any:
+        # The Cloud API has no nulls: an unknown value is an absent key. Dropping None here (rather than
+        # asking every caller for exclude_none=True) makes the rule impossible to forget.
+        dumped = handler(self)
+        if isinstance(dumped, dict):
+            return {key: value for key, value in dumped.items() if value is not None}
+        return dumped
+
+
+class InboundModel(ContractModel):
+    """A message (or part of one) the gateway receives from the cloud: unknown keys are ignored."""
+
+    model_config = ConfigDict(extra="ignore")
+
+
+class OutboundModel(ContractModel):
+    """A message (or part of one) the gateway sends: unknown keys are rejected."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+# ---------------------------------------------------------------------------------------------- numbers
+
+#: A finite JSON number; integers are accepted, strings and booleans are not.
+Float = Annotated[float, Strict(), AllowInfNan(False)]
+#: A JSON integer; ``1.0``, ``"1"`` and ``true`` are rejected.
+Int = Annotated[int, Strict()]
+#: A JSON boolean; ``0``, ``1`` and ``"true"`` are rejected.
+Bool = Annotated[bool, Strict()]
+#: A JSON string; numbers are rejected.
+Str = Annotated[str, Strict()]
+
+#: JSON's largest exactly representable integer; bounds counters and timestamps so JavaScript clouds agree.
+MAX_SAFE_INT = 2**53 - 1
+
+#: Milliseconds since the Unix epoch.
+TimestampMs = Annotated[int, Strict(), Field(ge=0, le=MAX_SAFE_INT, json_schema_extra={"x-unit": "ms"})]
+#: A sequence number (DRC ``seq``): non-negative.
+Seq = Annotated[int, Strict(), Field(ge=0, le=MAX_SAFE_INT)]
+
+Latitude = Annotated[
+    float,
+    Strict(),
+    AllowInfNan(False),
+    Field(ge=-90, le=90, description="Degrees, WGS84; negative is south.", json_schema_extra={"x-unit": "°"}),
+]
+Longitude = Annotated[
+    float,
+    Strict(),
+    AllowInfNan(False),
+    Field(
+        ge=-180, le=180, description="Degrees, WGS84; negative is west.", json_schema_extra={"x-unit": "°"}
+    ),
+]
+
+# ---------------------------------------------------------------------------------------------- strings
+
+#: ``tid`` / ``bid``: DJI sends UUIDs; any non-empty string of sane length is accepted and echoed as is.
+Identifier = Annotated[str, Strict(), StringConstraints(min_length=1, max_length=128)]
+#: A device or gateway serial number. No ``/``, ``+`` or ``#``, so it is always one safe MQTT topic level.
+SerialNumber = Annotated[
+    str, Strict(), StringConstraints(pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$", max_length=64)
+]
+#: A method name: lower-case snake case (extension methods start with ``x_``).
+MethodName = Annotated[str, Strict(), StringConstraints(pattern=r"^[a-z][a-z0-9_]{0,63}$", max_length=64)]
+#: ``{type-subtype-gimbalindex}``, e.g. ``39-0-7`` (DJI's unofficial device_mode_key).
+PayloadIndex = Annotated[
+    str,
+    Strict(),
+    StringConstraints(pattern=r"^[0-9]{1,5}-[0-9]{1,5}-[0-9]{1,5}$", max_length=17),
+    Field(description="Payload index {type-subtype-gimbalindex}, e.g. 39-0-7.", examples=["39-0-7"]),
+]
+#: Free text from the cloud that is only echoed or used as a key (task ids, client ids).
+Text = Annotated[str, Strict(), StringConstraints(max_length=256)]
+#: A short human-readable reason in a reply's ``output``; never carries request values.
+Reason = Annotated[str, Strict(), StringConstraints(max_length=300)]
+
+
+def _reveal_or_mask(value: SecretStr, handler: SerializerFunctionWrapHandler, info: SerializationInfo) -> str:
+    context = info.context if isinstance(info.context, dict) else {}
+    if context.get("reveal_secrets") is True:
+        return value.get_secret_value()
+    return "**********"
+
+
+#: A credential: hidden in repr, masked in dumps unless ``context={"reveal_secrets": True}``.
+Secret = Annotated[
+    SecretStr,
+    Strict(),
+    Field(max_length=4096),
+    WrapSerializer(_reveal_or_mask, return_type=str, when_used="always"),
+]
+
+# ---------------------------------------------------------------------------------------------- enums
+
+E = TypeVar("E", bound=enum.IntEnum)
+
+
+def _only_ints(enum_cls: type[enum.IntEnum]) -> Callable[[Any], Any]:
+    def check(value: Any) -> Any:
+        # pydantic's lax enum validation would take "1", 1.0 and True for 1; the contract takes integers only.
+        if isinstance(value, enum_cls) or (type(value) is int):
+            return value
+        raise ValueError(f"Input should be an integer, one of {[int(member) for member in enum_cls]}")
+
+    return check
+
+
+def int_enum(enum_cls: type[E]) -> Any:
+    """An integer enum field type that accepts the enum's integer values only."""
+    return Annotated[enum_cls, BeforeValidator(_only_ints(enum_cls))]
+
+
+def enum_description(enum_cls: type[enum.Enum], meanings: dict[Any, str]) -> str:
+    """``"0: Disconnected, 1: Connecting, ..."``: the seed's enum table as a description."""
+    return ", ".join(f"{member.value}: {meanings[member]}" for member in enum_cls)

@@ -1,0 +1,211 @@
+"""``data`` of the DRC (live flight control) messages of seed 003: ``drc/down`` and ``drc/up``.
+
+Owns stick commands, emergency stop, heartbeats and the high-rate pushes (obstacle distances, link delay,
+osd). Knows nothing about watchdogs or devices: the seq rules (reject older, accept repeats) belong to the
+dispatcher; this module only types the values.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, ClassVar
+
+from pydantic import AliasChoices, Field
+
+from .base import (
+    Bool,
+    Float,
+    InboundModel,
+    Latitude,
+    Longitude,
+    OutboundModel,
+    Reason,
+    Seq,
+    Text,
+    TimestampMs,
+)
+from .envelope import EmptyRequest
+from .results import ResultValue
+
+Distance = Annotated[int, Field(strict=True, ge=0, json_schema_extra={"x-unit": "mm"})]
+DelayMs = Annotated[int, Field(strict=True, ge=0, json_schema_extra={"x-unit": "ms"})]
+
+
+class DroneControl(InboundModel):
+    """Stick command (seed 003 § DRC-flight control), sent at 5..10 Hz (web clients up to 20 Hz).
+
+    Decisions: an absent axis is 0 (PROTOCOL-NOTES: "axes absent = 0"), so ``{"seq": 3}`` means "hover";
+    ``seq`` may sit beside ``data`` (folded in by the envelope). Seed contradiction: ``h`` is written
+    "min 5, max -4"; read as -4..5 m/s (climb up to 5, descend up to 4: DJI's own vertical limits).
+    x, y: ±17 m/s; w: ±90 °/s. Out-of-range values are rejected (325001), never clamped.
+    """
+
+    envelope_fields: ClassVar[dict[str, tuple[str, ...]]] = {"seq": ("seq",)}
+
+    seq: Seq = Field(description="Increasing; restarts at 0 when the operator changes axes.")
+    x: Float = Field(
+        default=0.0,
+        ge=-17,
+        le=17,
+        json_schema_extra={"x-unit": "m/s"},
+        description="Left/right speed (m/s); positive is left as seen from above, nose forward.",
+    )
+    y: Float = Field(
+        default=0.0,
+        ge=-17,
+        le=17,
+        json_schema_extra={"x-unit": "m/s"},
+        description="Forward/backward speed (m/s); positive is forward.",
+    )
+    h: Float = Field(
+        default=0.0,
+        ge=-4,
+        le=5,
+        json_schema_extra={"x-unit": "m/s"},
+        description="Vertical speed (m/s); positive is up. Seed's 'min 5, max -4' read as -4..5.",
+    )
+    w: Float = Field(
+        default=0.0,
+        ge=-90,
+        le=90,
+        json_schema_extra={"x-unit": "°/s"},
+        description="Yaw rate (°/s); positive is clockwise.",
+    )
+
+
+class DroneControlOutput(OutboundModel):
+    """``output`` of a drone_control reply: the seq it answers (and a reason on error)."""
+
+    seq: Seq | None = None
+    reason: Reason | None = None
+
+
+class DroneControlReply(OutboundModel):
+    """Reply to drone_control on drc/up. Non-0 when there is no flight/stick authority or the seq is too old
+    (319033, with ``output.seq``)."""
+
+    result: ResultValue
+    output: DroneControlOutput | None = None
+
+
+class DroneEmergencyStop(EmptyRequest):
+    """Emergency stop: brake and hover (seed 003 § DRC-drone emergency stop). No parameters."""
+
+
+class HeartBeat(InboundModel):
+    """DRC heartbeat from the cloud (seed 003 § DRC-heart beat), about 1 Hz.
+
+    Decisions (PROTOCOL-NOTES: real clouds differ): the send time may be ``timestamp`` or ``ts``, inside
+    ``data`` or beside it; ``seq`` inside or beside; inside wins. ``seq`` is optional (a heartbeat's job is
+    liveness; some web clients send none). The gateway echoes both on drc/up as ``seq``/``timestamp``.
+    """
+
+    envelope_fields: ClassVar[dict[str, tuple[str, ...]]] = {
+        "seq": ("seq",),
+        "timestamp": ("timestamp", "ts"),
+    }
+
+    seq: Seq | None = None
+    timestamp: TimestampMs = Field(
+        validation_alias=AliasChoices("timestamp", "ts"),
+        description="The cloud's send time (ms); accepted as timestamp or ts.",
+    )
+
+
+class HeartBeatEcho(OutboundModel):
+    """The gateway's heartbeat echo on drc/up: the received seq and send time, unchanged (the cloud computes
+    the delay from them)."""
+
+    seq: Seq | None = None
+    timestamp: TimestampMs
+
+
+class HsiInfoPush(OutboundModel):
+    """Obstacle distances (seed 003 § DRC-obstacle avoidance information pushing), at hsi_frequency.
+
+    Seed contradictions: the table names the array ``around_distances`` (360 points clockwise from the nose,
+    mm) and the example ``around_distance`` with 5 points. Decision: accept both names in, always emit
+    ``around_distances``; any length up to 360, points evenly spread clockwise over [0, 360) from the nose.
+    The example also carries ``left/right/front/back/vertical/horizontal_enable/_work`` flags the table
+    lacks: they are defined here as optional (DJI's later docs have them), so they may be sent.
+    """
+
+    up_distance: Distance
+    down_distance: Distance
+    around_distances: list[Distance] = Field(
+        max_length=360,
+        validation_alias=AliasChoices("around_distances", "around_distance"),
+        description="Horizontal obstacle distances (mm), clockwise from the nose over [0, 360).",
+    )
+    up_enable: Bool
+    up_work: Bool
+    down_enable: Bool
+    down_work: Bool
+    left_enable: Bool | None = None
+    left_work: Bool | None = None
+    right_enable: Bool | None = None
+    right_work: Bool | None = None
+    front_enable: Bool | None = None
+    front_work: Bool | None = None
+    back_enable: Bool | None = None
+    back_work: Bool | None = None
+    vertical_enable: Bool | None = None
+    vertical_work: Bool | None = None
+    horizontal_enable: Bool | None = None
+    horizontal_work: Bool | None = None
+
+
+class LiveviewDelay(OutboundModel):
+    """Delay of one video stream."""
+
+    video_id: Text = Field(description="Stream id, e.g. 1581BN210004555439234/52-0-0/normal-0.")
+    liveview_delay_time: DelayMs
+
+
+class DelayInfoPush(OutboundModel):
+    """Image-transmission link delays (seed 003 § DRC-delay information pushing)."""
+
+    sdr_cmd_delay: DelayMs = Field(description="Command link delay (ms).")
+    liveview_delay_list: list[LiveviewDelay] = Field(max_length=16)
+
+
+Angle = Annotated[
+    float, Field(strict=True, allow_inf_nan=False, ge=-180, le=180, json_schema_extra={"x-unit": "°"})
+]
+GimbalAngle = Annotated[
+    float, Field(strict=True, allow_inf_nan=False, ge=-360, le=360, json_schema_extra={"x-unit": "°"})
+]
+Speed = Annotated[float, Field(strict=True, allow_inf_nan=False, json_schema_extra={"x-unit": "m/s"})]
+
+
+class OsdInfoPush(OutboundModel):
+    """High-rate osd during DRC (seed 003 § DRC-high frequency osd information pushing), at osd_frequency.
+
+    The seed gives ``height`` the unit "degree": a typo; it is metres (the same ``height`` as in the osd).
+    """
+
+    attitude_head: Angle = Field(description="Heading (°), -180..180.")
+    latitude: Latitude
+    longitude: Longitude
+    height: Float = Field(
+        description="Altitude (m); the seed's unit 'degree' is a typo.", json_schema_extra={"x-unit": "m"}
+    )
+    speed_x: Speed
+    speed_y: Speed
+    speed_z: Speed
+    gimbal_pitch: GimbalAngle
+    gimbal_roll: GimbalAngle
+    gimbal_yaw: GimbalAngle
+
+
+__all__ = [
+    "DelayInfoPush",
+    "DroneControl",
+    "DroneControlOutput",
+    "DroneControlReply",
+    "DroneEmergencyStop",
+    "HeartBeat",
+    "HeartBeatEcho",
+    "HsiInfoPush",
+    "LiveviewDelay",
+    "OsdInfoPush",
+]

@@ -1,0 +1,101 @@
+"""``data`` of the events in seed 003 (gateway → cloud on ``events``); the cloud answers on events_reply
+with ``envelope.InboundResult``.
+
+Owns fly-to / take-off progress, DRC link state and the joystick-invalid reason. Knows nothing about when
+a device emits them.
+"""
+
+from __future__ import annotations
+
+import enum
+
+from pydantic import Field
+
+from .base import Int, OutboundModel, Text, enum_description, int_enum
+from .results import ResultValue
+from .state import DrcState, DrcStateField
+
+
+class FlyToStatus(enum.StrEnum):
+    PROGRESS = "wayline_progress"
+    FAILED = "wayline_failed"
+    OK = "wayline_ok"
+    CANCEL = "wayline_cancel"
+
+
+class TakeoffStatus(enum.StrEnum):
+    TASK_READY = "task_ready"
+    PROGRESS = "wayline_progress"
+    FAILED = "wayline_failed"
+    OK = "wayline_ok"
+    CANCEL = "wayline_cancel"
+    TASK_FINISH = "task_finish"
+
+
+class JoystickInvalidReason(enum.IntEnum):
+    RC_DISCONNECTED = 0
+    LOW_POWER_RETURN_HOME = 1
+    LOW_POWER_LANDING = 2
+    NEAR_GEO_ZONE = 3
+    AUTHORITY_GRABBED = 4
+
+
+_FLY_TO_STATUS = (
+    "wayline_progress: executing, wayline_failed: failed, wayline_ok: arrived at the target point, "
+    "wayline_cancel: cancelled"
+)
+_TAKEOFF_STATUS = "task_ready: ready to take off, " + _FLY_TO_STATUS + ", task_finish: take-off task finished"
+_JOYSTICK = enum_description(
+    JoystickInvalidReason,
+    {
+        JoystickInvalidReason.RC_DISCONNECTED: "Remote controller is disconnected",
+        JoystickInvalidReason.LOW_POWER_RETURN_HOME: "Low-power return-to-home",
+        JoystickInvalidReason.LOW_POWER_LANDING: "Low-power landing",
+        JoystickInvalidReason.NEAR_GEO_ZONE: "Approach GEO zone",
+        JoystickInvalidReason.AUTHORITY_GRABBED: "Authority grabbed by the remote controller",
+    },
+)
+
+
+class FlyToPointProgress(OutboundModel):
+    """Fly-to progress (seed 003 § Event notification of flyto result)."""
+
+    fly_to_id: Text = Field(min_length=1, description="The fly_to_id of the fly_to_point request.")
+    status: FlyToStatus = Field(description=_FLY_TO_STATUS)
+    result: ResultValue
+    way_point_index: Int = Field(ge=0, description="Index of the point being flown.")
+
+
+class TakeoffToPointProgress(OutboundModel):
+    """One-key take-off progress (seed 003 § Event notification of one-key taking off result)."""
+
+    status: TakeoffStatus = Field(description=_TAKEOFF_STATUS)
+    result: ResultValue
+    flight_id: Text = Field(min_length=1, description="The flight_id of the takeoff_to_point request.")
+    track_id: Text = Field(description="Wayline track id (may be empty).")
+    way_point_index: Int = Field(ge=0, description="Index of the point being flown.")
+
+
+class DrcStatusNotify(OutboundModel):
+    """DRC link state (seed 003 § Notification of DRC link state); result 5143xx on link errors."""
+
+    result: ResultValue
+    drc_state: DrcStateField
+
+
+class JoystickInvalidNotify(OutboundModel):
+    """Why stick control stopped working (seed 003 § Reason notification of invalid Joystick control)."""
+
+    reason: int_enum(JoystickInvalidReason) = Field(description=_JOYSTICK)
+
+
+__all__ = [
+    "DrcState",
+    "DrcStatusNotify",
+    "FlyToPointProgress",
+    "FlyToStatus",
+    "JoystickInvalidNotify",
+    "JoystickInvalidReason",
+    "TakeoffStatus",
+    "TakeoffToPointProgress",
+]

@@ -1,0 +1,118 @@
+"""Cloud API result codes: the table, their meanings and the six-digit rule.
+
+Owns every ``result`` value the gateway may put in a reply or an event. Knows nothing about devices.
+
+The rule (PROTOCOL-NOTES): 0 is success; an error is six digits led by 3 or 5. A common cloud SDK throws
+on any other leading digit, so -1, 1 or 4xxxxx must never be sent. ``ResultValue`` enforces the rule in
+every outbound model; ``ResultCode`` names the codes this project uses.
+
+Codes this project reserves (DJI's catalogue does not use the 399xxx block or 599xxx):
+
+- 399001 ``METHOD_NOT_SUPPORTED``: the method is in the contract, but this device cannot do it (a gimbal
+  asked to take off).
+- 399002 ``UNKNOWN_METHOD``: no model for this method on this topic (neither the seed nor an extension).
+- 599001 ``INTERNAL_ERROR``: the gateway failed (a bug or an unexpected exception); never a device error.
+- 336000 + ack: the Onboard SDK ground-station ACK family (seed 004), reported as ``ground_station_ack(ack)``
+  so the raw ACK survives the trip to the cloud (ack 0 is success and maps to 0).
+"""
+
+from __future__ import annotations
+
+import enum
+from typing import Annotated, Any
+
+from pydantic import AfterValidator, Strict, WithJsonSchema
+
+
+class ResultCode(enum.IntEnum):
+    """The result codes the gateway sends, each with its meaning (``ResultCode.BUSY.meaning``)."""
+
+    meaning: str
+
+    def __new__(cls, value: int, meaning: str) -> ResultCode:
+        member = int.__new__(cls, value)
+        member._value_ = value
+        member.meaning = meaning
+        return member
+
+    SUCCESS = 0, "Success."
+    BUSY = 314000, "The device cannot do this now (busy, or in a state that forbids it)."
+    INVALID_PARAMETERS = 325001, "Bad command parameters."
+    DEVICE_TIMEOUT = 325004, "The device did not answer in time."
+    DEVICE_NOT_CONNECTED = 325012, "The device is not connected."
+    NO_FLIGHT_AUTHORITY = 319030, "No flight control authority."
+    NO_PAYLOAD_AUTHORITY = 319031, "No payload control authority."
+    DRC_SEQ_TOO_OLD = 319033, "DRC sequence number is smaller than the last one."
+    DRC_PACKET_TIMEOUT = 319034, "DRC packet timed out."
+    EMERGENCY_STOP_FAILED = 319035, "Emergency stop failed."
+    SCREEN_DRAG_FAILED = 327004, "Camera screen drag failed."
+    AIM_FAILED = 327005, "Camera aim failed."
+    PHOTO_FAILED = 327006, "Taking a photo failed."
+    RECORDING_START_FAILED = 327007, "Starting recording failed."
+    RECORDING_STOP_FAILED = 327008, "Stopping recording failed."
+    CAMERA_MODE_SWITCH_FAILED = 327009, "Camera mode switch failed."
+    ZOOM_FAILED = 327010, "Setting the zoom (focal length) failed."
+    GIMBAL_AT_LIMIT = 327014, "The gimbal is at its limit."
+    DRC_MQTT_ERROR = 514300, "DRC link: MQTT error."
+    DRC_HEARTBEAT_TIMEOUT = 514301, "DRC link: heartbeat timed out."
+    DRC_CERTIFICATE_ERROR = 514302, "DRC link: certificate error."
+    DRC_LINK_LOST = 514303, "DRC link lost."
+    DRC_LINK_REFUSED = 514304, "DRC link refused."
+    METHOD_NOT_SUPPORTED = 399001, "dji-gateway: this device does not support this method."
+    UNKNOWN_METHOD = 399002, "dji-gateway: unknown method for this topic."
+    INTERNAL_ERROR = 599001, "dji-gateway: internal error."
+
+
+#: The Onboard SDK ground-station ACK family: 336000 + the raw ACK value (1..999).
+GROUND_STATION_ACK_BASE = 336000
+
+
+def is_valid_result(code: int) -> bool:
+    """True for 0 and for six-digit codes led by 3 or 5 (the only values cloud SDKs accept)."""
+    if type(code) is bool or not isinstance(code, int):
+        return False
+    return code == 0 or 300000 <= code <= 399999 or 500000 <= code <= 599999
+
+
+def ground_station_ack(ack: int) -> int:
+    """The result code for an Onboard SDK ground-station ACK value (seed 004): 0 stays 0, else 336000+ack."""
+    if not 0 <= ack <= 999:
+        raise ValueError(f"ground-station ACK {ack} outside 0..999")
+    return 0 if ack == 0 else GROUND_STATION_ACK_BASE + ack
+
+
+def meaning(code: int) -> str:
+    """A short meaning for any result code, including the 336xxx family and codes not in the table."""
+    try:
+        return ResultCode(code).meaning
+    except ValueError:
+        pass
+    if GROUND_STATION_ACK_BASE < code < GROUND_STATION_ACK_BASE + 1000:
+        return f"Onboard SDK ground-station ACK {code - GROUND_STATION_ACK_BASE}."
+    return (
+        "Unknown result code." if is_valid_result(code) else "Invalid result code (not 0 nor 3xxxxx/5xxxxx)."
+    )
+
+
+def _check_result(code: Any) -> int:
+    if not is_valid_result(code):
+        raise ValueError("result must be 0 or six digits led by 3 or 5")
+    return int(code)
+
+
+#: An outbound ``result``: 0, 300000..399999 or 500000..599999.
+ResultValue = Annotated[
+    int,
+    Strict(),
+    AfterValidator(_check_result),
+    WithJsonSchema(
+        {
+            "description": "0 on success, else six digits led by 3 or 5.",
+            "anyOf": [
+                {"type": "integer", "const": 0},
+                {"type": "integer", "minimum": 300000, "maximum": 399999},
+                {"type": "integer", "minimum": 500000, "maximum": 599999},
+            ],
+        }
+    ),
+]

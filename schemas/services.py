@@ -1,0 +1,310 @@
+"""``data`` of every service in seed 003 (cloud → gateway on ``services``) and of their replies.
+
+Owns the parameters of authority grabs, DRC enter/exit, take-off and fly-to, camera and gimbal control,
+with the seed's ranges, enums and units. Knows nothing about how a device carries them out.
+
+Every reply in the seed is ``{"result": int}`` ("Non-0 means error"): it is ``envelope.ResultReply``, which
+adds an optional ``output.reason`` on failure.
+"""
+
+from __future__ import annotations
+
+import enum
+import re
+from typing import Annotated
+
+from pydantic import Field, StringConstraints, field_validator, model_validator
+
+from .base import (
+    Bool,
+    Float,
+    InboundModel,
+    Int,
+    Latitude,
+    Longitude,
+    PayloadIndex,
+    Secret,
+    Text,
+    enum_description,
+    int_enum,
+)
+from .envelope import EmptyRequest
+
+# ------------------------------------------------------------------------------------------------- enums
+
+
+class RcLostAction(enum.IntEnum):
+    HOVER = 0
+    LAND = 1
+    RETURN_HOME = 2
+
+
+class ExitWaylineWhenRcLost(enum.IntEnum):
+    CONTINUE = 0
+    EXIT = 1
+
+
+class CameraMode(enum.IntEnum):
+    PHOTO = 0
+    RECORDING = 1
+
+
+class CameraType(enum.StrEnum):
+    ZOOM = "zoom"
+    WIDE = "wide"
+    IR = "ir"
+
+
+class GimbalResetMode(enum.IntEnum):
+    RECENTER = 0
+    DOWN = 1
+    RECENTER_PAN = 2
+    PITCH_DOWN = 3
+
+
+_RC_LOST = enum_description(
+    RcLostAction,
+    {
+        RcLostAction.HOVER: "Hovering",
+        RcLostAction.LAND: "Landing",
+        RcLostAction.RETURN_HOME: "Returning to home",
+    },
+)
+_EXIT_WAYLINE = enum_description(
+    ExitWaylineWhenRcLost,
+    {
+        ExitWaylineWhenRcLost.CONTINUE: "Continue the wayline task",
+        ExitWaylineWhenRcLost.EXIT: "Exit the wayline task and do the RC-lost action",
+    },
+)
+_CAMERA_MODE = enum_description(
+    CameraMode, {CameraMode.PHOTO: "Photo taking", CameraMode.RECORDING: "Recording"}
+)
+_RESET_MODE = enum_description(
+    GimbalResetMode,
+    {
+        GimbalResetMode.RECENTER: "gimbal recenter",
+        GimbalResetMode.DOWN: "gimbal down",
+        GimbalResetMode.RECENTER_PAN: "recenter gimbal pan",
+        GimbalResetMode.PITCH_DOWN: "gimbal pitch down",
+    },
+)
+
+# ---------------------------------------------------------------------------------------- shared fields
+
+CameraTypeField = Annotated[CameraType, Field(description="zoom, wide or ir (infrared).")]
+
+
+class PayloadRequest(InboundModel):
+    """A request that names one payload (camera/gimbal) by its index."""
+
+    payload_index: PayloadIndex
+
+
+# --------------------------------------------------------------------------------------------- services
+
+
+class FlightAuthorityGrab(EmptyRequest):
+    """Grab flight control authority (seed 003 § Flight control authority grabbing). No parameters."""
+
+
+class PayloadAuthorityGrab(PayloadRequest):
+    """Grab payload control authority for one payload (seed 003 § Payload control authority grabbing)."""
+
+
+_ADDRESS = re.compile(
+    r"^(?:\[[0-9A-Fa-f:.]{2,45}\]|[A-Za-z0-9](?:[A-Za-z0-9.-]{0,251}[A-Za-z0-9])?):([0-9]{1,5})$"
+)
+
+
+class MqttBroker(InboundModel):
+    """The DRC broker and its credentials (seed 003 § drc_mode_enter, ``mqtt_broker``).
+
+    ``password`` is a ``SecretStr``: hidden in repr and masked in dumps unless
+    ``context={"reveal_secrets": True}``; validation errors under ``mqtt_broker`` never quote a value.
+    Credentials may expire without dropping an open connection (PROTOCOL-NOTES), so ``expire_time`` in the
+    past is not an error here.
+    """
+
+    address: Annotated[str, StringConstraints(strict=True, max_length=260)] = Field(
+        description="host:port, e.g. mqtt.dji.com:8883 or 192.0.2.1:8883 ([v6]:port for IPv6).",
+        examples=["mqtt.dji.com:8883"],
+    )
+    client_id: Annotated[str, StringConstraints(strict=True, min_length=1, max_length=256)] = Field(
+        description="MQTT client id for the DRC link, e.g. drc-4J4R101."
+    )
+    username: Annotated[str, StringConstraints(strict=True, max_length=1024)]
+    password: Secret
+    expire_time: Int = Field(
+        ge=0, description="Unix time (s) when the credentials expire.", json_schema_extra={"x-unit": "s"}
+    )
+    enable_tls: Bool
+
+    @field_validator("address")
+    @classmethod
+    def _host_port(cls, value: str) -> str:
+        match = _ADDRESS.fullmatch(value)
+        if match is None or not 1 <= int(match.group(1)) <= 65535:
+            raise ValueError("address must be host:port with a port in 1..65535")
+        return value
+
+
+Frequency = Annotated[int, Field(strict=True, ge=1, le=30, json_schema_extra={"x-unit": "Hz"})]
+
+
+class DrcModeEnter(InboundModel):
+    """Enter live flight control (DRC) (seed 003 § Enter the live flight controls mode)."""
+
+    mqtt_broker: MqttBroker
+    osd_frequency: Frequency = Field(description="osd_info_push rate, 1..30 Hz.")
+    hsi_frequency: Frequency = Field(description="hsi_info_push rate, 1..30 Hz.")
+
+
+class DrcModeExit(EmptyRequest):
+    """Leave live flight control (seed 003 § Exit the live flight controls mode). No parameters."""
+
+
+class TakeoffToPoint(InboundModel):
+    """One-key take-off to a target point (seed 003 § One-key taking off).
+
+    ``rc_lost_action`` and ``exit_wayline_when_rc_lost`` are in the table but not in the seed's example, so
+    they are optional (absent: the device keeps its configured behaviour). The other fields are required.
+    """
+
+    target_latitude: Latitude
+    target_longitude: Longitude
+    target_height: Float = Field(
+        ge=2,
+        le=1500,
+        description="WGS84 altitude of the target (m). Hover on arrival.",
+        json_schema_extra={"x-unit": "m"},
+    )
+    security_takeoff_height: Float = Field(
+        ge=2,
+        le=1500,
+        description="Climb to this height above the take-off point first (m).",
+        json_schema_extra={"x-unit": "m"},
+    )
+    rth_altitude: Int = Field(
+        ge=2,
+        le=1500,
+        description="Return-to-home height above the take-off point (m).",
+        json_schema_extra={"x-unit": "m"},
+    )
+    rc_lost_action: int_enum(RcLostAction) | None = Field(default=None, description=_RC_LOST)
+    exit_wayline_when_rc_lost: int_enum(ExitWaylineWhenRcLost) | None = Field(
+        default=None, description=_EXIT_WAYLINE
+    )
+    flight_id: Text = Field(min_length=1, description="Task UUID of this take-off.")
+    max_speed: Int = Field(
+        ge=1, le=15, description="Maximum speed (m/s).", json_schema_extra={"x-unit": "m/s"}
+    )
+
+
+class FlyToPointTarget(InboundModel):
+    """One fly-to target: WGS84 degrees and altitude (m).
+
+    Heights here and in take-off: 2..1500 m; the seed's step 0.1 is display precision and is not enforced
+    (binary floats are not multiples of 0.1).
+    """
+
+    latitude: Latitude
+    longitude: Longitude
+    height: Float = Field(ge=2, le=1500, description="WGS84 altitude (m).", json_schema_extra={"x-unit": "m"})
+
+
+#: How many fly-to points are accepted (see ``FlyToPoint``).
+MAX_FLY_TO_POINTS = 16
+
+
+class FlyToPoint(InboundModel):
+    """Fly to a target point (seed 003 § flyto target point).
+
+    Seed contradiction: the table says "Only one target point is supported" but the example sends two
+    (identical) points. Decision: accept 1..16 points; the device flies them in order and the last one is the
+    target. DJI docks honour exactly one, and a cloud that copied the seed's example sends two; rejecting it
+    would fail such clouds for no safety gain (every point is range-checked). An adapter that can fly only one
+    point answers 325001 for more than one. ``max_speed`` min is 0 here (1 for take-off), as in the seed.
+    """
+
+    fly_to_id: Text = Field(min_length=1, description="Target point (task) id.")
+    max_speed: Int = Field(
+        ge=0, le=15, description="Maximum speed (m/s).", json_schema_extra={"x-unit": "m/s"}
+    )
+    points: list[FlyToPointTarget] = Field(min_length=1, max_length=MAX_FLY_TO_POINTS)
+
+
+class FlyToPointStop(EmptyRequest):
+    """End the fly-to task (seed 003 § End the task of flying to target point). No parameters."""
+
+
+class CameraModeSwitch(PayloadRequest):
+    """Switch the camera mode (seed 003 § switch the camera mode)."""
+
+    camera_mode: int_enum(CameraMode) = Field(description=_CAMERA_MODE)
+
+
+class CameraPhotoTake(PayloadRequest):
+    """Take one photo (seed 003 § take single photo)."""
+
+
+class CameraRecordingStart(PayloadRequest):
+    """Start recording (seed 003 § start recording)."""
+
+
+class CameraRecordingStop(PayloadRequest):
+    """Stop recording (seed 003 § stop recording)."""
+
+
+class CameraScreenDrag(PayloadRequest):
+    """Drag the camera view: gimbal speeds (seed 003 § drag screen). ``yaw_speed`` only acts when not locked.
+
+    The seed gives a unit (°/s) but no range; ±360 °/s is the R SDK gimbal's own maximum, so a garbage value
+    is refused instead of slewing a gimbal at full speed.
+    """
+
+    locked: Bool = Field(description="true: the aircraft body turns with the gimbal; false: only the gimbal.")
+    pitch_speed: Float = Field(
+        ge=-360, le=360, description="Gimbal pitch speed (°/s).", json_schema_extra={"x-unit": "°/s"}
+    )
+    yaw_speed: Float = Field(
+        ge=-360,
+        le=360,
+        description="Gimbal yaw speed (°/s); only when not locked.",
+        json_schema_extra={"x-unit": "°/s"},
+    )
+
+
+class CameraAim(PayloadRequest):
+    """Double-tap to aim: the point (x, y) of the view becomes its centre (seed 003 § double tab to AIM).
+
+    x and y are fractions of the view from its upper-left corner, 0..1.
+    """
+
+    camera_type: CameraTypeField
+    locked: Bool = Field(description="true: the aircraft body turns with the gimbal; false: only the gimbal.")
+    x: Float = Field(ge=0, le=1, description="Horizontal position, 0 (left) .. 1 (right).")
+    y: Float = Field(ge=0, le=1, description="Vertical position, 0 (top) .. 1 (bottom).")
+
+
+#: The seed's zoom limits: visible light 2..200, infrared 2..20.
+MAX_IR_ZOOM = 20
+
+
+class CameraFocalLengthSet(PayloadRequest):
+    """Set the zoom factor (seed 003 § zoom). 2..200 for visible light; 2..20 when ``camera_type`` is ir."""
+
+    camera_type: CameraTypeField
+    zoom_factor: Float = Field(ge=2, le=200, description="Zoom factor: 2..200 (visible), 2..20 (infrared).")
+
+    @model_validator(mode="after")
+    def _ir_limit(self) -> CameraFocalLengthSet:
+        if self.camera_type is CameraType.IR and self.zoom_factor > MAX_IR_ZOOM:
+            raise ValueError(f"zoom_factor for an ir camera must be at most {MAX_IR_ZOOM}")
+        return self
+
+
+class GimbalReset(PayloadRequest):
+    """Reset the gimbal (seed 003 § reset the gimbal)."""
+
+    reset_mode: int_enum(GimbalResetMode) = Field(description=_RESET_MODE)

@@ -1,0 +1,244 @@
+"""Every JSON example of seed 003 validates against its model and round-trips; each seed contradiction is
+pinned to the decision documented on its model (schemas/examples.py holds the examples, verbatim)."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import pytest
+from pydantic import ValidationError
+
+from schemas import Profile, ResultCode, TopicKind, default_registry
+from schemas.drc import DroneControl, HeartBeat, HsiInfoPush
+from schemas.examples import GATEWAY_EXAMPLES, SEED_003, SeedExample
+from schemas.services import MAX_FLY_TO_POINTS, CameraFocalLengthSet, DrcModeEnter, FlyToPoint, TakeoffToPoint
+
+REGISTRY = default_registry()
+
+
+def _validate(example: SeedExample, raw: Any) -> Any:
+    if example.kind is TopicKind.STATE:
+        return REGISTRY.validate(example.kind, raw, profile=Profile.AIRCRAFT)
+    return REGISTRY.validate(example.kind, raw)
+
+
+def _expected(example: SeedExample) -> dict[str, Any]:
+    expected = {**json.loads(example.text), **example.patch}
+    data = dict(expected.get("data") or {})
+    for old, new in example.renames.items():
+        data[new] = data.pop(old)
+    return {**expected, "data": data}
+
+
+def test_every_seed_example_is_here() -> None:
+    # 44 ```json blocks in seed 003: 1 state, 4 events, 15 services + 15 replies, 9 DRC.
+    assert len(SEED_003) == 44
+    kinds = [example.kind for example in SEED_003]
+    assert kinds.count(TopicKind.SERVICES) == kinds.count(TopicKind.SERVICES_REPLY) == 15
+    assert kinds.count(TopicKind.EVENTS) == 4
+    assert kinds.count(TopicKind.DRC_DOWN) == 3 and kinds.count(TopicKind.DRC_UP) == 6
+
+
+@pytest.mark.parametrize("example", SEED_003, ids=lambda e: f"{e.kind.slug}.{e.method or 'state'}")
+def test_seed_example_validates_and_round_trips(example: SeedExample) -> None:
+    text = example.text
+    if example.patch:  # the seed's example omits a key the contract requires (see example.note)
+        text = json.dumps({**json.loads(text), **example.patch})
+    message = _validate(example, text.encode())
+    assert getattr(message, "method", None) == example.method
+    dumped = json.loads(message.model_dump_json(context={"reveal_secrets": True}))
+    assert dumped == _expected(example)
+    # and once more through the model: the dump is a fixed point
+    again = _validate(example, dumped)
+    assert again == message
+
+
+def test_gateway_examples_validate_and_round_trip() -> None:
+    for example in GATEWAY_EXAMPLES:
+        profile = example.name if example.kind in (TopicKind.OSD, TopicKind.STATE) else None
+        message = REGISTRY.validate(example.kind, json.dumps(example.payload), profile=profile)
+        assert json.loads(message.model_dump_json()) == example.payload
+
+
+def _seed(kind: TopicKind, method: str) -> dict[str, Any]:
+    (example,) = [e for e in SEED_003 if e.kind is kind and e.method == method]
+    return {**json.loads(example.text), **example.patch}
+
+
+# ----------------------------------------------------------------------------- fly_to_point: points
+
+
+def test_fly_to_point_seed_sends_two_points_and_both_are_kept_in_order() -> None:
+    # Decision (services.FlyToPoint): 1..16 points, flown in order; the seed's example has two.
+    raw = _seed(TopicKind.SERVICES, "fly_to_point")
+    raw["data"]["points"][1]["height"] = 200
+    message = REGISTRY.validate(TopicKind.SERVICES, raw)
+    assert [point.height for point in message.data.points] == [100, 200]
+
+
+@pytest.mark.parametrize("count", [0, MAX_FLY_TO_POINTS + 1])
+def test_fly_to_point_point_count_limits(count: int) -> None:
+    point = {"latitude": 1.0, "longitude": 2.0, "height": 50}
+    with pytest.raises(ValidationError):
+        FlyToPoint.model_validate({"fly_to_id": "a", "max_speed": 5, "points": [point] * count})
+    FlyToPoint.model_validate({"fly_to_id": "a", "max_speed": 5, "points": [point] * max(1, count - 1)})
+
+
+# ----------------------------------------------------------------------------- hsi_info_push: names
+
+
+def test_hsi_accepts_both_array_names_and_emits_the_table_name() -> None:
+    base = {"up_distance": 1, "down_distance": 2, "up_enable": True, "up_work": True, "down_enable": False}
+    base["down_work"] = False
+    for name in ("around_distances", "around_distance"):
+        push = HsiInfoPush.model_validate({**base, name: [1, 2, 3]})
+        dumped = json.loads(push.model_dump_json())
+        assert dumped["around_distances"] == [1, 2, 3] and "around_distance" not in dumped
+    with pytest.raises(ValidationError):
+        HsiInfoPush.model_validate({**base, "around_distances": [1] * 361})
+    with pytest.raises(ValidationError):  # outbound: a flag the contract does not define
+        HsiInfoPush.model_validate({**base, "around_distances": [], "diagonal_enable": True})
+
+
+# ----------------------------------------------------------------------------- drone_control: h, axes
+
+
+@pytest.mark.parametrize(("h", "ok"), [(-4, True), (5, True), (5.01, False), (-4.01, False), (-5, False)])
+def test_drone_control_h_is_minus4_to_5(h: float, ok: bool) -> None:
+    # The seed writes "min 5, max -4"; read as -4..5 m/s (drc.DroneControl).
+    if ok:
+        assert DroneControl.model_validate({"seq": 1, "h": h}).h == h
+    else:
+        with pytest.raises(ValidationError):
+            DroneControl.model_validate({"seq": 1, "h": h})
+
+
+def test_drone_control_absent_axes_are_zero_and_seq_may_sit_beside_data() -> None:
+    message = REGISTRY.validate(
+        TopicKind.DRC_DOWN, b'{"method": "drone_control", "seq": 7, "data": {"y": 1.5}}'
+    )
+    assert message.data == DroneControl(seq=7, x=0.0, y=1.5, h=0.0, w=0.0)
+    # inside wins over beside
+    message = REGISTRY.validate(TopicKind.DRC_DOWN, {"method": "drone_control", "seq": 9, "data": {"seq": 8}})
+    assert message.data.seq == 8
+    with pytest.raises(ValidationError):  # no seq anywhere
+        REGISTRY.validate(TopicKind.DRC_DOWN, {"method": "drone_control", "data": {"x": 1}})
+
+
+# ----------------------------------------------------------------------------- heart_beat: ts / seq
+
+
+@pytest.mark.parametrize(
+    "raw",
+    [
+        {"method": "heart_beat", "data": {"seq": 10, "timestamp": 1670415891013}},  # the seed
+        {"method": "heart_beat", "data": {"seq": 10, "ts": 1670415891013}},
+        {"method": "heart_beat", "seq": 10, "data": {"ts": 1670415891013}},
+        {"method": "heart_beat", "seq": 10, "timestamp": 1670415891013, "data": {}},
+        {"method": "heart_beat", "seq": 10, "timestamp": 1670415891013},
+    ],
+)
+def test_heart_beat_spellings(raw: dict[str, Any]) -> None:
+    message = REGISTRY.validate(TopicKind.DRC_DOWN, raw)
+    assert message.data == HeartBeat(seq=10, timestamp=1670415891013)
+
+
+def test_heart_beat_inside_wins_and_seq_is_optional() -> None:
+    raw = {"method": "heart_beat", "timestamp": 5, "data": {"ts": 6}}
+    assert REGISTRY.validate(TopicKind.DRC_DOWN, raw).data == HeartBeat(seq=None, timestamp=6)
+    with pytest.raises(ValidationError):
+        REGISTRY.validate(TopicKind.DRC_DOWN, {"method": "heart_beat", "data": {"seq": 1}})
+
+
+# ----------------------------------------------------------------------------- envelopes and policy
+
+
+@pytest.mark.parametrize("data", ["{}", "null", None])
+def test_no_parameter_services_accept_empty_null_or_missing_data(data: str | None) -> None:
+    text = '{"tid": "t", "bid": "b", "timestamp": 1, "method": "drc_mode_exit"'
+    text += f', "data": {data}}}' if data is not None else "}"
+    assert REGISTRY.validate(TopicKind.SERVICES, text).method == "drc_mode_exit"
+
+
+def test_inbound_ignores_unknown_fields_outbound_rejects_them() -> None:
+    raw = _seed(TopicKind.SERVICES, "camera_aim")
+    raw["new_cloud_field"] = 1
+    raw["data"]["future_option"] = {"x": 1}
+    message = REGISTRY.validate(TopicKind.SERVICES, raw)
+    assert "future_option" not in message.data.model_dump() and "new_cloud_field" not in message.model_dump()
+    event = _seed(TopicKind.EVENTS, "drc_status_notify")
+    event["data"]["extra"] = 1
+    with pytest.raises(ValidationError):
+        REGISTRY.validate(TopicKind.EVENTS, event)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("max_speed", "12"),
+        ("max_speed", 12.0),
+        ("max_speed", True),
+        ("target_height", "100"),
+        ("target_height", float("nan")),
+        ("target_height", float("inf")),
+        ("rc_lost_action", "1"),
+        ("rc_lost_action", True),
+        ("rc_lost_action", 1.0),
+        ("rc_lost_action", 3),
+        ("target_latitude", 90.5),
+    ],
+)
+def test_safety_numbers_are_strict(field: str, value: Any) -> None:
+    data = _seed(TopicKind.SERVICES, "takeoff_to_point")["data"]
+    TakeoffToPoint.model_validate(data)
+    with pytest.raises(ValidationError):
+        TakeoffToPoint.model_validate({**data, field: value})
+
+
+def test_ir_zoom_is_limited_to_20() -> None:
+    CameraFocalLengthSet.model_validate(
+        {"payload_index": "39-0-7", "camera_type": "zoom", "zoom_factor": 200}
+    )
+    CameraFocalLengthSet.model_validate({"payload_index": "39-0-7", "camera_type": "ir", "zoom_factor": 20})
+    with pytest.raises(ValidationError):
+        CameraFocalLengthSet.model_validate(
+            {"payload_index": "39-0-7", "camera_type": "ir", "zoom_factor": 20.5}
+        )
+
+
+def test_drc_password_is_masked_unless_revealed() -> None:
+    data = _seed(TopicKind.SERVICES, "drc_mode_enter")["data"]
+    enter = DrcModeEnter.model_validate(data)
+    assert "jwt_token" not in repr(enter) and "jwt_token" not in enter.model_dump_json()
+    assert "jwt_token" in enter.model_dump_json(context={"reveal_secrets": True})
+    assert enter.mqtt_broker.password.get_secret_value() == "jwt_token"
+
+
+@pytest.mark.parametrize("frequency", [0, 31, 10.0, "10"])
+def test_drc_frequencies_are_1_to_30_hz(frequency: Any) -> None:
+    data = _seed(TopicKind.SERVICES, "drc_mode_enter")["data"]
+    with pytest.raises(ValidationError):
+        DrcModeEnter.model_validate({**data, "osd_frequency": frequency})
+
+
+@pytest.mark.parametrize(
+    "address", ["mqtt.dji.com", "mqtt.dji.com:0", "mqtt.dji.com:65536", "a b:1", ":8883"]
+)
+def test_drc_broker_address_must_be_host_port(address: str) -> None:
+    data = _seed(TopicKind.SERVICES, "drc_mode_enter")["data"]
+    with pytest.raises(ValidationError):
+        DrcModeEnter.model_validate({**data, "mqtt_broker": {**data["mqtt_broker"], "address": address}})
+    for good in ("192.0.2.1:8883", "[2001:db8::1]:1883", "mqtt.dji.com:8883"):
+        DrcModeEnter.model_validate({**data, "mqtt_broker": {**data["mqtt_broker"], "address": good}})
+
+
+def test_outbound_result_codes_follow_the_six_digit_rule() -> None:
+    event = _seed(TopicKind.EVENTS, "drc_status_notify")
+    for good in (0, ResultCode.DRC_HEARTBEAT_TIMEOUT, 336004, 599001):
+        event["data"]["result"] = int(good)
+        REGISTRY.validate(TopicKind.EVENTS, event)
+    for bad in (-1, 1, 4, 425001, 99999, 600000, 3250010):
+        event["data"]["result"] = bad
+        with pytest.raises(ValidationError):
+            REGISTRY.validate(TopicKind.EVENTS, event)
