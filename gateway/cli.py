@@ -10,7 +10,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from gateway import codec_cli
+from gateway import codec_cli, run_cli
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -19,6 +19,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Bridge DJI R SDK gimbals, RoboMaster robots and Onboard SDK aircraft to the Cloud API.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    run_cli.add_parsers(sub)
     codec_cli.add_parsers(sub)
 
     schema = sub.add_parser("schema", help="Cloud API contract tools")

@@ -124,6 +124,10 @@ class MqttBridge:
         client.on_socket_open = self._on_socket_open
         return client
 
+    def set_will(self, topic: str, payload: bytes) -> None:
+        """The message the broker publishes if the gateway vanishes (must precede :meth:`start`)."""
+        self._client.will_set(topic, payload, qos=1, retain=False)
+
     def start(self) -> None:
         s = self.settings
         props = None

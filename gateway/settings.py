@@ -23,6 +23,9 @@ from pydantic import (
 )
 from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
 
+from adapters.config import ProductSettings
+from adapters.rsdk.config import RsdkDeviceSettings
+
 __all__ = [
     "BrokerSettings",
     "ConfigError",
@@ -38,17 +41,6 @@ _STRICT = ConfigDict(extra="forbid", frozen=True)
 
 class ConfigError(ValueError):
     """A configuration that cannot run; the message is one line naming the field."""
-
-
-class ProductSettings(BaseModel):
-    """What ``update_topo`` says about a device: Cloud API product enumeration (domain/type/sub_type)."""
-
-    model_config = _STRICT
-    domain: str = "3"
-    type: int = 1001
-    sub_type: int = 0
-    thing_version: str = "1.1.2"
-    device_secret: SecretStr | None = None
 
 
 class BrokerSettings(BaseModel):
@@ -121,28 +113,6 @@ class DispatcherSettings(BaseModel):
     event_retries: int = Field(3, ge=0, le=10)
     event_retry_interval: float = Field(3.0, gt=0)
     max_pending: int = Field(256, ge=1, description="requests in flight at once; more get 314000 busy")
-
-
-class RsdkDeviceSettings(BaseModel):
-    """A DJI R SDK gimbal (RS 2 / RS 3 / RS 4) on a CAN bus, exposed as a camera payload."""
-
-    model_config = _STRICT
-    type: Literal["rsdk"] = "rsdk"
-    sn: str = Field(min_length=1, max_length=64)
-    payload_index: str = Field("1001-0-0", pattern=r"^\d+-\d+-\d+$")
-    product: ProductSettings = ProductSettings(domain="1", type=1001, sub_type=0)
-    interface: str = Field("virtual", description="python-can interface: socketcan, slcan, pcan, virtual, …")
-    channel: str = Field("djigw", description="can0, /dev/ttyACM0, socket://127.0.0.1:PORT, …")
-    bitrate: int = 1_000_000
-    tx_id: int = 0x223
-    rx_id: int = 0x222
-    osd_period: float | None = Field(None, gt=0, description="default: the gateway's osd_period")
-    silence_timeout: float = Field(2.0, gt=0, description="no push or reply for this long → offline")
-    fov_h_deg: float = Field(70.0, gt=0, lt=180, description="camera field of view used by camera_aim")
-    fov_v_deg: float = Field(45.0, gt=0, lt=180)
-    drag_hold: float = Field(0.5, gt=0, description="a drag lasts this long after its last message")
-    drag_rate_hz: float = Field(10.0, ge=10, le=50, description="speed control refresh while dragging")
-    max_speed_dps: float = Field(360.0, gt=0, le=360)
 
 
 DeviceSettings = Annotated[RsdkDeviceSettings, Field(discriminator="type")]

@@ -1,10 +1,15 @@
-"""Test-session fixtures shared by every suite (hypothesis profile; brokers come in later modules)."""
+"""Test-session fixtures shared by every suite: hypothesis profile, brokers, CAN channels."""
 
 from __future__ import annotations
 
 import os
+import uuid
+from collections.abc import Iterator
 
+import pytest
 from hypothesis import HealthCheck, settings
+
+from gateway.local_broker import LocalBroker
 
 settings.register_profile(
     "default",
@@ -14,3 +19,26 @@ settings.register_profile(
 )
 settings.register_profile("ci", parent=settings.get_profile("default"), max_examples=200, derandomize=True)
 settings.load_profile("ci" if os.environ.get("CI") else "default")
+
+
+@pytest.fixture(scope="session")
+def broker() -> Iterator[LocalBroker]:
+    """One mosquitto for the session, on a free loopback port (never a broker someone else started)."""
+    with LocalBroker() as b:
+        yield b
+
+
+@pytest.fixture
+def private_broker() -> Iterator[LocalBroker]:
+    """A broker of this test's own, for tests that kill and restart it."""
+    b = LocalBroker().start()
+    try:
+        yield b
+    finally:
+        b.stop()
+
+
+@pytest.fixture
+def can_channel() -> str:
+    """A fresh python-can virtual channel name, so tests never hear each other."""
+    return f"djigw-test-{uuid.uuid4().hex[:8]}"

@@ -8,7 +8,7 @@ import sys
 import zlib
 
 import pytest
-from hypothesis import given
+from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from adapters.rsdk.protocol import (
@@ -281,6 +281,8 @@ def test_valid_frames_after_garbage_are_found(parts: list[tuple[bytes, Frame]], 
 def test_frame_cut_at_any_offset_then_valid_frame(a: Frame, b: Frame, data: st.DataObject) -> None:
     raw_a = encode(a)
     cut = data.draw(st.integers(1, len(raw_a) - 1))
+    # when a's missing tail happens to equal b's first bytes, a really is complete on the wire
+    assume(not encode(b).startswith(raw_a[cut:]))
     out = decode_all(raw_a[:cut] + encode(b))
     assert frames_of(out) == [b]
     assert sum(len(i.raw) for i in out if isinstance(i, BadFrame)) == cut

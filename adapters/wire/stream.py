@@ -56,12 +56,13 @@ class FrameRules(Protocol[F_co]):
 class StreamDecoder(Generic[F]):
     """Feed bytes, get frames and :class:`BadFrame` values, in stream order."""
 
-    __slots__ = ("_buf", "_pos", "_rules", "stats")
+    __slots__ = ("_buf", "_pos", "_rules", "_want", "stats")
 
     def __init__(self, rules: FrameRules[F]) -> None:
         self._rules = rules
         self._buf = bytearray()
         self._pos = 0
+        self._want = 0  # length of the checked, incomplete candidate at the buffer's start (0: none)
         self.stats = DecoderStats()
 
     @property
@@ -72,6 +73,9 @@ class StreamDecoder(Generic[F]):
     def feed(self, data: bytes | bytearray | memoryview) -> list[F | BadFrame]:
         if data:
             self._buf += data
+        if len(self._buf) < self._want:
+            # the candidate's header was checked already; nothing can complete before its length
+            return []
         out: list[F | BadFrame] = []
         self._scan(out)
         return out
@@ -92,11 +96,13 @@ class StreamDecoder(Generic[F]):
         """Forget buffered bytes (a link reopened); counters are kept."""
         self._buf.clear()
         self._pos = 0
+        self._want = 0
 
     def _scan(self, out: list[F | BadFrame], bad: tuple[str, int] | None = None) -> None:
         buf, rules, stats = self._buf, self._rules, self.stats
         sof, hlen = rules.sof, rules.header_len
         pos = self._pos
+        self._want = 0
         while True:
             i = buf.find(sof, pos)
             end = len(buf) if i < 0 else i
@@ -123,6 +129,7 @@ class StreamDecoder(Generic[F]):
                 pos += 1
                 continue
             if len(buf) - pos < n:
+                self._want = n  # the candidate moves to the buffer's start when compacted
                 break
             frame = bytes(buf[pos : pos + n])
             res = rules.parse(frame)

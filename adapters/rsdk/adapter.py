@@ -1,0 +1,554 @@
+"""The R SDK gimbal adapter: Cloud API payload methods → R SDK commands on CAN; pushes → osd.
+
+Owns one gimbal: its :class:`~adapters.rsdk.link.CanLink` (reopened when it fails), the SEQ-keyed
+table of commands waiting for a reply (SEQ is the only safe key, PROTOCOL-NOTES), the parameter
+push that feeds ``osd``, the silence watchdog that marks the gimbal offline, and the drag loop that
+keeps speed control alive (a speed command lasts 0.5 s, seed §2.3.4.2) while the cloud keeps
+dragging. Knows nothing of MQTT: it reports through a :class:`~adapters.base.TelemetrySink`.
+
+Mapping (the README's table is generated from the same decisions):
+
+=========================  =====================================================  ==============
+Cloud API method           R SDK command(s)                                        failure result
+=========================  =====================================================  ==============
+camera_screen_drag         0E 01 speed control, ctrl 0x88, resent at ≥10 Hz;       327004
+                           zero speeds + release 0.5 s after the last drag
+camera_aim                 0E 00 incremental position from (x, y) and the FOV     327005
+gimbal_reset 0/1/2/3       0E 0E recenter / 0E 00 yaw 0 + pitch down /             314000
+                           0E 00 yaw 0 / 0E 00 pitch down
+camera_photo_take          0D 00 command 0x0001 (shutter)                          327006
+camera_recording_start     0D 00 command 0x0003                                    327007
+camera_recording_stop      0D 00 command 0x0004                                    327008
+camera_mode_switch         none (kept in osd ``cameras[].camera_mode``)            —
+camera_focal_length_set    none: R SDK gimbals cannot zoom                         399001
+x_rsdk_*                   0E 03/04/05/06/0E/00/11/12/0F, 0E 09                    314000
+=========================  =====================================================  ==============
+
+A reply's return code 0x01 (parse error) maps to 325001; 0x02 (execution failed) and 0xFF to the
+method's failure result above.
+
+Directions (chosen, since neither the seed nor the Cloud API says): a positive Cloud API
+``pitch_speed`` tilts up (R SDK pitch angle increases), a positive ``yaw_speed`` pans right
+(R SDK yaw angle increases); "down" is pitch −90° clamped to the gimbal's range (−56° on an RS).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from adapters.base import (
+    Adapter,
+    CallResult,
+    DeviceInfo,
+    DeviceNotConnected,
+    DeviceRejected,
+    DeviceTimeout,
+    InvalidParameters,
+    MethodNotSupported,
+    TelemetrySink,
+)
+from adapters.rsdk.can import Reassembler, segment
+from adapters.rsdk.commands import CommandError, Message, build_frame, decode_message, decode_reply, lookup
+from adapters.rsdk.config import RsdkDeviceSettings
+from adapters.rsdk.link import CanLink, LinkError
+from adapters.rsdk.protocol import Frame, encode
+from schemas.results import ResultCode
+
+log = logging.getLogger(__name__)
+
+__all__ = ["GimbalAdapter"]
+
+PITCH_RANGE = (-56.0, 146.0)  # seed §2.3.4.1 pitch range −560 … +1460 (0.1°)
+SPEED_TAKE_OVER = 0x88  # bit 7 take over, bit 3 ignore focal length (PROTOCOL-NOTES)
+SPEED_RELEASE = 0x08
+RC_PARSE_ERROR = 0x01
+SDK_DEVICE_ID = 0x00000001  # seed §2.3.3: "DJI R SDK"
+
+
+@dataclass
+class _Pending:
+    future: asyncio.Future[Message]
+    cmd_set: int
+    cmd_id: int
+    name: str
+
+
+class GimbalAdapter(Adapter):
+    def __init__(self, settings: RsdkDeviceSettings, *, now: Callable[[], float] = time.monotonic) -> None:
+        self.settings = settings
+        self.info = DeviceInfo(
+            sn=settings.sn,
+            domain=settings.product.domain,
+            type=settings.product.type,
+            sub_type=settings.product.sub_type,
+            thing_version=settings.product.thing_version,
+            payload_index=settings.payload_index,
+        )
+        self._now = now
+        self._link: CanLink | None = None
+        self._rx = Reassembler(rx_id=settings.rx_id)
+        self._seq = 0
+        self._pending: dict[int, _Pending] = {}
+        self._sink: TelemetrySink | None = None
+        self._tasks: list[asyncio.Task[None]] = []
+        self._last_heard = float("-inf")
+        self._online = False
+        self._stopping = False
+        # what the gimbal told us (wire units converted to degrees)
+        self.attitude: tuple[float, float, float] | None = None  # yaw, roll, pitch
+        self.joints: tuple[float, float, float] | None = None
+        self.limits: dict[str, int] | None = None
+        self.stiffness: dict[str, int] | None = None
+        self.version: str | None = None
+        self.camera_mode = 0
+        self.recording = False
+        # drag state
+        self._drag_speed: tuple[float, float] = (0.0, 0.0)  # yaw, pitch °/s
+        self._drag_until = float("-inf")
+        self._drag_task: asyncio.Task[None] | None = None
+        self.handlers = {
+            "camera_screen_drag": self._screen_drag,
+            "camera_aim": self._aim,
+            "gimbal_reset": self._gimbal_reset,
+            "camera_photo_take": self._photo,
+            "camera_recording_start": self._recording_start,
+            "camera_recording_stop": self._recording_stop,
+            "camera_mode_switch": self._mode_switch,
+            "camera_focal_length_set": self._zoom,
+            "x_rsdk_limit_angle_set": self._x_limit_set,
+            "x_rsdk_limit_angle_get": self._x_limit_get,
+            "x_rsdk_stiffness_set": self._x_stiffness_set,
+            "x_rsdk_stiffness_get": self._x_stiffness_get,
+            "x_rsdk_follow_mode_set": self._x_follow_mode,
+            "x_rsdk_position_set": self._x_position,
+            "x_rsdk_selfie": self._x_selfie,
+            "x_rsdk_active_track_toggle": self._x_active_track,
+            "x_rsdk_focus_set": self._x_focus,
+            "x_rsdk_auto_calibration": self._x_calibration,
+            "x_rsdk_version_get": self._x_version,
+        }
+
+    # -- life cycle -------------------------------------------------------------------------------
+    @property
+    def online(self) -> bool:
+        return self._online
+
+    async def start(self, sink: TelemetrySink) -> None:
+        self._sink = sink
+        loop = asyncio.get_running_loop()
+        s = self.settings
+        self._link = CanLink(
+            interface=s.interface,
+            channel=s.channel,
+            bitrate=s.bitrate,
+            rx_id=s.rx_id,
+            loop=loop,
+            on_frame=self._on_can,
+            on_down=self._on_link_down,
+            bus_options=s.bus_options,
+        )
+        self._tasks.append(loop.create_task(self._supervise(), name=f"rsdk-{s.sn}-supervisor"))
+
+    async def stop(self) -> None:
+        self._stopping = True
+        with contextlib.suppress(Exception):
+            await self.stop_motion()
+        for task in [*self._tasks, self._drag_task]:
+            if task is not None:
+                task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        await asyncio.sleep(0.05)  # let the sender thread put the stop frames on the bus
+        if self._link is not None:
+            self._link.close()
+        self._fail_pending(DeviceNotConnected(f"gimbal {self.info.sn} adapter stopped"))
+
+    async def stop_motion(self) -> None:
+        """Zero speed and release speed control. Fire-and-forget: no reply is awaited, so a stalled
+        gimbal or a busy loop cannot delay it."""
+        self._drag_until = float("-inf")
+        self._drag_speed = (0.0, 0.0)
+        if self._drag_task is not None:
+            self._drag_task.cancel()
+            self._drag_task = None
+        for ctrl in (SPEED_TAKE_OVER, SPEED_RELEASE):
+            with contextlib.suppress(LinkError, CommandError):
+                self._send_no_reply(
+                    "speed_control", {"yaw_speed": 0, "roll_speed": 0, "pitch_speed": 0, "ctrl_byte": ctrl}
+                )
+
+    # -- link supervision -------------------------------------------------------------------------
+    async def _supervise(self) -> None:
+        """Keep the link open, the push enabled, and the online flag honest."""
+        s = self.settings
+        next_poll = 0.0
+        while not self._stopping:
+            link = self._link
+            assert link is not None
+            if not link.up:
+                try:
+                    await link.open()
+                    self._rx.reset()
+                    next_poll = 0.0
+                except LinkError as exc:
+                    log.info("gimbal %s: %s; retrying in %.1fs", self.info.sn, exc, s.reopen_interval)
+                    self._set_online(False)
+                    await asyncio.sleep(s.reopen_interval)
+                    continue
+            now = self._now()
+            if self._online and now - self._last_heard > s.silence_timeout:
+                log.warning("gimbal %s silent for %.1fs: offline", self.info.sn, now - self._last_heard)
+                self._set_online(False)
+                self._fail_pending(DeviceNotConnected(f"gimbal {self.info.sn} went silent"))
+            if not self._online and now >= next_poll:
+                # (re-)enable the push: a gimbal that restarted has it off; its reply brings us online
+                next_poll = now + min(1.0, s.silence_timeout / 2)
+                with contextlib.suppress(LinkError, CommandError):
+                    self._send_no_reply("push_settings", {"ctrl_byte": 0x01}, want_reply=True)
+                    self._send_no_reply("get_version", {"device_id": SDK_DEVICE_ID}, want_reply=True)
+            await asyncio.sleep(0.1)
+
+    def _on_link_down(self, reason: str) -> None:
+        self._set_online(False)
+        self._fail_pending(DeviceNotConnected(f"gimbal {self.info.sn} CAN link down"))
+
+    def _set_online(self, online: bool) -> None:
+        if online == self._online:
+            return
+        self._online = online
+        if not online:
+            self._drag_until = float("-inf")
+        if self._sink is not None:
+            self._sink.online_changed(self.info.sn, online)
+
+    def _fail_pending(self, exc: Exception) -> None:
+        pending, self._pending = self._pending, {}
+        for p in pending.values():
+            if not p.future.done():
+                p.future.set_exception(exc)
+
+    # -- receive ---------------------------------------------------------------------------------
+    def _on_can(self, arb_id: int, data: bytes) -> None:
+        for item in self._rx.feed(arb_id, data):
+            if isinstance(item, Frame):
+                self._on_frame(item)
+
+    def _on_frame(self, frame: Frame) -> None:
+        self._last_heard = self._now()
+        self._set_online(True)
+        if frame.is_reply:
+            p = self._pending.pop(frame.seq, None)
+            if p is None:
+                self._on_unsolicited_reply(frame)
+                return
+            try:
+                msg = decode_reply(frame, p.cmd_set, p.cmd_id, p.name)
+            except CommandError as exc:
+                if not p.future.done():
+                    p.future.set_exception(DeviceRejected(ResultCode.BUSY, f"unreadable reply: {exc}"))
+                return
+            if not p.future.done():
+                p.future.set_result(msg)
+            return
+        try:
+            msg = decode_message(frame)
+        except CommandError:
+            return
+        if msg.name == "param_push":
+            self._on_push(msg.fields)
+
+    def _on_unsolicited_reply(self, frame: Frame) -> None:
+        """Replies to fire-and-forget commands (the start-up version query) still carry news."""
+        if frame.key == (0x0E, 0x09):
+            with contextlib.suppress(CommandError):
+                msg = decode_reply(frame, 0x0E, 0x09, "get_version")
+                self._version_from(msg.fields)
+
+    def _version_from(self, f: Mapping[str, Any]) -> None:
+        v = int(f.get("version", 0))
+        self.version = ".".join(f"{(v >> s) & 0xFF:02X}" for s in (24, 16, 8, 0))
+
+    def _on_push(self, f: Mapping[str, Any]) -> None:
+        ctrl = f["ctrl_byte"]
+        if ctrl & 0x01:
+            self.attitude = (f["yaw_angle"] / 10, f["roll_angle"] / 10, f["pitch_angle"] / 10)
+            self.joints = (f["yaw_joint_angle"] / 10, f["roll_joint_angle"] / 10, f["pitch_joint_angle"] / 10)
+        if ctrl & 0x02:
+            self.limits = {
+                k: f[k] for k in ("pitch_max", "pitch_min", "yaw_max", "yaw_min", "roll_max", "roll_min")
+            }
+        if ctrl & 0x04:
+            self.stiffness = {
+                "pitch": f["pitch_stiffness"],
+                "roll": f["roll_stiffness"],
+                "yaw": f["yaw_stiffness"],
+            }
+
+    # -- send -------------------------------------------------------------------------------------
+    def _next_seq(self) -> int:
+        self._seq = (self._seq + 1) & 0xFFFF
+        while self._seq in self._pending:
+            self._seq = (self._seq + 1) & 0xFFFF
+        return self._seq
+
+    def _send_no_reply(self, name: str, fields: Mapping[str, Any], *, want_reply: bool = False) -> None:
+        if self._link is None:
+            raise LinkError("not started")
+        frame = build_frame(name, self._next_seq(), fields, cmd_type=None if want_reply else 0x00)
+        self._link.send(segment(encode(frame), self.settings.tx_id))
+
+    async def request(self, name: str, fields: Mapping[str, Any]) -> Message:
+        """Send one command and wait for its reply (matched by SEQ) within the adapter's timeout."""
+        if not self._online or self._link is None or not self._link.up:
+            raise DeviceNotConnected(f"gimbal {self.info.sn} is not connected")
+        spec = lookup(name)
+        try:
+            frame = build_frame(name, self._next_seq(), fields)
+        except CommandError as exc:
+            raise InvalidParameters(str(exc)) from None
+        fut: asyncio.Future[Message] = asyncio.get_running_loop().create_future()
+        self._pending[frame.seq] = _Pending(fut, spec.cmd_set, spec.cmd_id, name)
+        try:
+            self._link.send(segment(encode(frame), self.settings.tx_id))
+            return await asyncio.wait_for(fut, self.settings.request_timeout)
+        except LinkError as exc:
+            raise DeviceNotConnected(str(exc)) from None
+        except TimeoutError:
+            raise DeviceTimeout(f"gimbal {self.info.sn} did not answer {name}") from None
+        finally:
+            self._pending.pop(frame.seq, None)
+
+    async def _command(self, name: str, fields: Mapping[str, Any], failure: int) -> Message:
+        msg = await self.request(name, fields)
+        code = msg.fields.get("return_code", 0)
+        if code == 0:
+            return msg
+        if code == RC_PARSE_ERROR:
+            raise DeviceRejected(ResultCode.INVALID_PARAMETERS, f"gimbal could not parse {name}")
+        raise DeviceRejected(failure, f"gimbal refused {name} (return code 0x{code:02X})")
+
+    # -- telemetry --------------------------------------------------------------------------------
+    def osd_snapshot(self) -> Mapping[str, Any] | None:
+        if self.attitude is None:
+            return None
+        yaw, roll, pitch = self.attitude
+        body: dict[str, Any] = {
+            "payload_index": self.info.payload_index,
+            "gimbal_yaw": yaw,
+            "gimbal_roll": roll,
+            "gimbal_pitch": pitch,
+            "cameras": [
+                {
+                    "payload_index": self.info.payload_index,
+                    "camera_mode": self.camera_mode,
+                    "recording_state": 1 if self.recording else 0,
+                }
+            ],
+        }
+        if self.joints is not None:
+            body["x_joint_angles"] = {"yaw": self.joints[0], "roll": self.joints[1], "pitch": self.joints[2]}
+        if self.limits is not None:
+            lim = self.limits
+            body["x_angle_limits"] = {
+                "pitch_max": float(lim["pitch_max"]),
+                "pitch_min": -float(lim["pitch_min"]),
+                "yaw_max": float(lim["yaw_max"]),
+                "yaw_min": -float(lim["yaw_min"]),
+                "roll_max": float(lim["roll_max"]),
+                "roll_min": -float(lim["roll_min"]),
+            }
+        if self.stiffness is not None:
+            body["x_motor_stiffness"] = dict(self.stiffness)
+        return body
+
+    # -- Cloud API methods ------------------------------------------------------------------------
+    async def _screen_drag(self, data: Any) -> CallResult:
+        s = self.settings
+        yaw = 0.0 if data.locked else float(data.yaw_speed)
+        pitch = float(data.pitch_speed)
+        if max(abs(yaw), abs(pitch)) > s.max_speed_dps:
+            raise InvalidParameters(f"drag speed above {s.max_speed_dps:g} °/s")
+        self._drag_speed = (yaw, pitch)
+        self._drag_until = self._now() + s.drag_hold
+        await self._command("speed_control", self._speed_fields(yaw, pitch), ResultCode.SCREEN_DRAG_FAILED)
+        if self._drag_task is None or self._drag_task.done():
+            self._drag_task = asyncio.get_running_loop().create_task(self._drag_loop())
+        return CallResult()
+
+    @staticmethod
+    def _speed_fields(yaw: float, pitch: float) -> dict[str, int]:
+        return {
+            "yaw_speed": round(yaw * 10),
+            "roll_speed": 0,
+            "pitch_speed": round(pitch * 10),
+            "ctrl_byte": SPEED_TAKE_OVER,
+        }
+
+    async def _drag_loop(self) -> None:
+        """Refresh speed control while the drag lasts, then stop and release."""
+        period = 1.0 / self.settings.drag_rate_hz
+        try:
+            while self._now() < self._drag_until:
+                await asyncio.sleep(min(period, max(0.0, self._drag_until - self._now())))
+                if self._now() >= self._drag_until:
+                    break
+                with contextlib.suppress(LinkError, CommandError):
+                    self._send_no_reply("speed_control", self._speed_fields(*self._drag_speed))
+        finally:
+            self._drag_task = None
+            for ctrl in (SPEED_TAKE_OVER, SPEED_RELEASE):
+                with contextlib.suppress(LinkError, CommandError):
+                    self._send_no_reply(
+                        "speed_control",
+                        {"yaw_speed": 0, "roll_speed": 0, "pitch_speed": 0, "ctrl_byte": ctrl},
+                    )
+
+    async def _aim(self, data: Any) -> CallResult:
+        s = self.settings
+        d_yaw = (float(data.x) - 0.5) * s.fov_h_deg
+        d_pitch = (0.5 - float(data.y)) * s.fov_v_deg
+        fields = {
+            "yaw_angle": round(d_yaw * 10),
+            "roll_angle": 0,
+            "pitch_angle": round(d_pitch * 10),
+            "ctrl_byte": 0x04,  # incremental, roll invalid
+            "time_for_action": max(1, round(s.aim_time_s * 10)),
+        }
+        await self._command("position_control", fields, ResultCode.AIM_FAILED)
+        return CallResult()
+
+    def _pitch_down(self) -> int:
+        return round(max(PITCH_RANGE[0], -90.0) * 10)
+
+    async def _gimbal_reset(self, data: Any) -> CallResult:
+        mode = int(data.reset_mode)
+        if mode == 0:
+            await self._command("recenter_selfie", {"recenter_and_selfie_command": 0x01}, ResultCode.BUSY)
+            return CallResult()
+        yaw_valid = mode in (1, 2)
+        pitch_valid = mode in (1, 3)
+        ctrl = (
+            0x01 | 0x04 | (0 if yaw_valid else 0x02) | (0 if pitch_valid else 0x08)
+        )  # absolute, roll invalid
+        fields = {
+            "yaw_angle": 0,
+            "roll_angle": 0,
+            "pitch_angle": self._pitch_down() if pitch_valid else 0,
+            "ctrl_byte": ctrl,
+            "time_for_action": 10,
+        }
+        await self._command("position_control", fields, ResultCode.BUSY)
+        return CallResult()
+
+    async def _camera(self, command: int, failure: int) -> None:
+        await self._command("camera_control", {"camera_control_command": command}, failure)
+
+    async def _photo(self, data: Any) -> CallResult:
+        await self._camera(0x0001, ResultCode.PHOTO_FAILED)
+        return CallResult()
+
+    async def _recording_start(self, data: Any) -> CallResult:
+        await self._camera(0x0003, ResultCode.RECORDING_START_FAILED)
+        self.recording = True
+        return CallResult()
+
+    async def _recording_stop(self, data: Any) -> CallResult:
+        await self._camera(0x0004, ResultCode.RECORDING_STOP_FAILED)
+        self.recording = False
+        return CallResult()
+
+    async def _mode_switch(self, data: Any) -> CallResult:
+        # The R SDK has no camera-mode command; the mode decides what shutter means for the operator.
+        self.camera_mode = int(data.camera_mode)
+        return CallResult()
+
+    async def _zoom(self, data: Any) -> CallResult:
+        raise MethodNotSupported("R SDK gimbals have no zoom command (camera_focal_length_set)")
+
+    # -- extension methods ------------------------------------------------------------------------
+    async def _x_limit_set(self, data: Any) -> CallResult:
+        names = ("pitch_max", "pitch_min", "yaw_max", "yaw_min", "roll_max", "roll_min")
+        await self._command(
+            "set_limit_angle", {"ctrl_byte": 0x01, **{n: getattr(data, n) for n in names}}, ResultCode.BUSY
+        )
+        return CallResult()
+
+    async def _x_limit_get(self, data: Any) -> CallResult:
+        msg = await self._command("get_limit_angle", {"ctrl_byte": 0x01}, ResultCode.BUSY)
+        names = ("pitch_max", "pitch_min", "yaw_max", "yaw_min", "roll_max", "roll_min")
+        return CallResult(0, {n: msg.fields[n] for n in names})
+
+    async def _x_stiffness_set(self, data: Any) -> CallResult:
+        fields = {
+            "ctrl_byte": 0x01,
+            "pitch_stiffness": data.pitch,
+            "roll_stiffness": data.roll,
+            "yaw_stiffness": data.yaw,
+        }
+        await self._command("set_stiffness", fields, ResultCode.BUSY)
+        return CallResult()
+
+    async def _x_stiffness_get(self, data: Any) -> CallResult:
+        msg = await self._command("get_stiffness", {"ctrl_byte": 0x01}, ResultCode.BUSY)
+        f = msg.fields
+        return CallResult(
+            0, {"pitch": f["pitch_stiffness"], "roll": f["roll_stiffness"], "yaw": f["yaw_stiffness"]}
+        )
+
+    async def _x_follow_mode(self, data: Any) -> CallResult:
+        fields = {"operating_mode": int(data.mode), "recenter_and_selfie_command": 0x00}
+        await self._command("follow_mode", fields, ResultCode.BUSY)
+        return CallResult()
+
+    async def _x_position(self, data: Any) -> CallResult:
+        ctrl = 0x01 if data.absolute else 0x00
+        values = {}
+        for bit, axis in ((0x02, "yaw"), (0x04, "roll"), (0x08, "pitch")):
+            value = getattr(data, axis)
+            if value is None:
+                ctrl |= bit
+            values[f"{axis}_angle"] = round((value or 0.0) * 10)
+        fields = {**values, "ctrl_byte": ctrl, "time_for_action": round(data.duration * 10)}
+        await self._command("position_control", fields, ResultCode.BUSY)
+        return CallResult()
+
+    async def _x_selfie(self, data: Any) -> CallResult:
+        await self._command("recenter_selfie", {"recenter_and_selfie_command": 0x02}, ResultCode.BUSY)
+        return CallResult()
+
+    async def _x_active_track(self, data: Any) -> CallResult:
+        await self._command("active_track", {"enable_active_track": 0x03}, ResultCode.BUSY)
+        return CallResult()
+
+    async def _x_focus(self, data: Any) -> CallResult:
+        # sub-command 0x01 has no reply frame (seed Figure 32): the send is the result
+        if not self._online:
+            raise DeviceNotConnected(f"gimbal {self.info.sn} is not connected")
+        fields = {
+            "command_sub_id": 0x01,
+            "control_type": 0x00,
+            "data_length": 0x02,
+            "absolute_position": data.position,
+        }
+        try:
+            self._send_no_reply("focus_motor", fields)
+        except LinkError as exc:
+            raise DeviceNotConnected(str(exc)) from None
+        return CallResult()
+
+    async def _x_calibration(self, data: Any) -> CallResult:
+        item = {"id": 0x00, "value": 0x01 if data.start else 0x00}
+        await self._command("auto_calibration", {"tlv_buffer": [item]}, ResultCode.BUSY)
+        return CallResult()
+
+    async def _x_version(self, data: Any) -> CallResult:
+        msg = await self._command("get_version", {"device_id": SDK_DEVICE_ID}, ResultCode.BUSY)
+        self._version_from(msg.fields)
+        return CallResult(0, {"device_id": msg.fields["device_id"], "version": self.version})

@@ -1,0 +1,146 @@
+"""The CAN link of one gimbal: binds the R SDK codec to a python-can bus, thinly.
+
+Owns the ``can.Bus`` (any interface python-can opens: socketcan, slcan, pcan, virtual …), its
+notifier thread and a sender thread. Received CAN frames on the gimbal's id are handed to the
+asyncio loop with ``call_soon_threadsafe``; sends go through a queue so a slow or stuck adapter
+never blocks the loop. python-can exceptions become :class:`LinkError`, and a bus that fails
+(unplugged adapter, closed pty, refused socket) is reported once through ``on_down``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import queue
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import can
+
+log = logging.getLogger(__name__)
+
+__all__ = ["CanLink", "LinkError"]
+
+
+class LinkError(Exception):
+    """The CAN link could not be opened or failed while in use."""
+
+
+class _Listener(can.Listener):
+    def __init__(self, link: CanLink) -> None:
+        self._link = link
+
+    def on_message_received(self, msg: can.Message) -> None:
+        if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+            return
+        if msg.arbitration_id != self._link.rx_id:
+            return
+        self._link.frames_in += 1
+        self._link._from_thread(self._link.on_frame, msg.arbitration_id, bytes(msg.data))
+
+    def on_error(self, exc: Exception) -> None:
+        self._link._from_thread(self._link._failed, f"receive failed: {type(exc).__name__}: {exc}")
+
+
+class CanLink:
+    def __init__(
+        self,
+        *,
+        interface: str,
+        channel: str,
+        bitrate: int,
+        rx_id: int,
+        loop: asyncio.AbstractEventLoop,
+        on_frame: Callable[[int, bytes], None],
+        on_down: Callable[[str], None],
+        bus_options: dict[str, Any] | None = None,
+    ) -> None:
+        self.interface, self.channel, self.bitrate, self.rx_id = interface, channel, bitrate, rx_id
+        self.on_frame = on_frame
+        self.on_down = on_down
+        self._options = dict(bus_options or {})
+        self._loop = loop
+        self._bus: can.BusABC | None = None
+        self._notifier: can.Notifier | None = None
+        self._sendq: queue.SimpleQueue[can.Message | None] = queue.SimpleQueue()
+        self._sender: threading.Thread | None = None
+        self._up = False
+        self.frames_in = 0
+        self.frames_out = 0
+        self.send_errors = 0
+
+    @property
+    def up(self) -> bool:
+        return self._up
+
+    async def open(self) -> None:
+        """Open the bus (in a worker thread: some interfaces block while they open)."""
+        if self._up:
+            return
+        try:
+            bus = await asyncio.to_thread(self._make_bus)
+        except (can.CanError, OSError, ValueError, ImportError) as exc:
+            raise LinkError(f"cannot open {self.interface} {self.channel}: {exc}") from None
+        self._bus = bus
+        self._notifier = can.Notifier(bus, [_Listener(self)], timeout=0.05)
+        self._sendq = queue.SimpleQueue()
+        self._sender = threading.Thread(target=self._send_loop, args=(bus, self._sendq), daemon=True)
+        self._sender.start()
+        self._up = True
+        log.info("CAN link open: %s %s", self.interface, self.channel)
+
+    def _make_bus(self) -> can.BusABC:
+        kwargs: dict[str, Any] = {"interface": self.interface, "channel": self.channel, **self._options}
+        if self.interface != "virtual":
+            kwargs.setdefault("bitrate", self.bitrate)
+        kwargs.setdefault("receive_own_messages", False)
+        return can.Bus(**kwargs)
+
+    def send(self, frames: list[tuple[int, bytes]]) -> None:
+        """Queue CAN frames in order; raises LinkError when the link is down."""
+        if not self._up:
+            raise LinkError("CAN link is down")
+        for arb_id, data in frames:
+            self._sendq.put(can.Message(arbitration_id=arb_id, data=data, is_extended_id=False))
+
+    def close(self) -> None:
+        self._up = False
+        if self._notifier is not None:
+            with contextlib.suppress(Exception):
+                self._notifier.stop(timeout=1.0)
+            self._notifier = None
+        self._sendq.put(None)
+        if self._sender is not None:
+            self._sender.join(timeout=2.0)
+            self._sender = None
+        if self._bus is not None:
+            with contextlib.suppress(Exception):
+                self._bus.shutdown()
+            self._bus = None
+
+    # -- threads ----------------------------------------------------------------------------------
+    def _send_loop(self, bus: can.BusABC, q: queue.SimpleQueue[can.Message | None]) -> None:
+        while True:
+            msg = q.get()
+            if msg is None:
+                return
+            try:
+                bus.send(msg, timeout=0.2)
+                self.frames_out += 1
+            except (can.CanError, OSError, ValueError) as exc:
+                self.send_errors += 1
+                self._from_thread(self._failed, f"send failed: {type(exc).__name__}: {exc}")
+                return
+
+    def _from_thread(self, fn: Callable[..., None], *args: Any) -> None:
+        with contextlib.suppress(RuntimeError):  # loop closed during shutdown
+            self._loop.call_soon_threadsafe(fn, *args)
+
+    def _failed(self, reason: str) -> None:
+        if not self._up:
+            return
+        log.warning("CAN link %s %s failed: %s", self.interface, self.channel, reason)
+        self.close()
+        self.on_down(reason)

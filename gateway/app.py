@@ -1,0 +1,156 @@
+"""The composition root: the only place that builds concrete adapters from settings and wires the
+broker connection, the dispatcher, the northbound publisher and the devices together.
+
+Owns the service's life cycle: start devices (absent hardware is not an error: it comes online
+later), connect to the broker, hand every received message to the dispatcher, publish telemetry,
+and on stop: stop every motion first, then publish the clean offline topology, then disconnect.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Sequence
+from typing import Any
+
+from adapters.base import Adapter
+from adapters.rsdk.adapter import GimbalAdapter
+from adapters.rsdk.extensions import EXTENSIONS as RSDK_EXTENSIONS
+from gateway.clock import Clock, SystemClock
+from gateway.devices import DeviceTable
+from gateway.dispatcher import Dispatcher
+from gateway.metrics import Metrics
+from gateway.mqtt import MqttBridge
+from gateway.northbound import Northbound
+from gateway.settings import GatewaySettings
+from schemas import TopicKind, default_registry, subscriptions, topic
+from schemas.registry import Registry
+
+log = logging.getLogger(__name__)
+
+__all__ = ["GatewayApp", "build_adapters", "build_registry"]
+
+
+def build_adapters(settings: GatewaySettings) -> list[Adapter]:
+    adapters: list[Adapter] = []
+    for device in settings.devices:
+        if device.type == "rsdk":
+            adapters.append(GimbalAdapter(device))
+        else:  # pragma: no cover - the settings union admits only known types
+            raise ValueError(f"unknown device type {device.type!r}")
+    return adapters
+
+
+def build_registry(settings: GatewaySettings) -> Registry:
+    """The seed's methods plus the extension methods of every device family configured."""
+    registry = default_registry()
+    families = {d.type for d in settings.devices}
+    if "rsdk" in families:
+        for method, data, reply, summary in RSDK_EXTENSIONS:
+            registry.register(TopicKind.SERVICES, method, data, reply, summary=summary)
+    return registry
+
+
+class GatewayApp:
+    def __init__(
+        self,
+        settings: GatewaySettings,
+        *,
+        adapters: Sequence[Adapter] | None = None,
+        clock: Clock | None = None,
+        metrics: Metrics | None = None,
+    ) -> None:
+        self.settings = settings
+        self.clock = clock or SystemClock()
+        self.metrics = metrics or Metrics()
+        self.registry = build_registry(settings)
+        self.devices = DeviceTable(adapters if adapters is not None else build_adapters(settings))
+        self.stop_event = asyncio.Event()
+        self.started = asyncio.Event()
+        self.bridge: MqttBridge | None = None
+        self.dispatcher: Dispatcher | None = None
+        self.northbound: Northbound | None = None
+
+    async def run(self) -> None:
+        loop = asyncio.get_running_loop()
+        s = self.settings
+        gw = s.gateway_sn
+        subs = [(name, 1) for name in subscriptions(gw)]
+        # the will and the clean goodbye are the same: a topology with no sub-devices (all offline)
+        northbound_holder: dict[str, Any] = {}
+        self.bridge = MqttBridge(
+            s.broker,
+            client_id=s.broker.client_id or f"djigw-{gw}",
+            subscriptions=subs,
+            loop=loop,
+            metrics=self.metrics,
+            on_connected=lambda: northbound_holder["nb"].on_connected(),
+        )
+        self.northbound = Northbound(
+            settings=s,
+            registry=self.registry,
+            devices=self.devices,
+            outbox=self.bridge,
+            clock=self.clock,
+            metrics=self.metrics,
+        )
+        northbound_holder["nb"] = self.northbound
+        offline = (topic(TopicKind.STATUS, gw), self.northbound.topology(offline=True))
+        self.bridge.set_will(*offline)
+        self.dispatcher = Dispatcher(
+            gateway_sn=gw,
+            registry=self.registry,
+            devices=self.devices,
+            outbox=self.bridge,
+            settings=s.dispatcher,
+            clock=self.clock,
+            metrics=self.metrics,
+            on_authority_change=self._authority_changed,
+            on_events_reply=self.northbound.events_reply,
+        )
+        for adapter in self.devices:
+            await adapter.start(self.northbound)
+        self.bridge.start()
+        periodic = loop.create_task(self.northbound.run(self.stop_event), name="northbound")
+        consumer = loop.create_task(self._consume(), name="inbound")
+        self.started.set()
+        log.info("gateway %s running with %d device(s)", gw, len(self.devices))
+        try:
+            await self.stop_event.wait()
+        finally:
+            await self._shutdown(periodic, consumer, offline)
+
+    def stop(self) -> None:
+        self.stop_event.set()
+
+    def _authority_changed(self) -> None:
+        if self.northbound is None:
+            return
+        for adapter in self.devices:
+            if adapter.online:
+                self.northbound.publish_state(adapter)
+
+    async def _consume(self) -> None:
+        assert self.bridge is not None and self.dispatcher is not None
+        queue = self.bridge.queue
+        while True:
+            item = await queue.get()
+            self.dispatcher.submit(item.topic, item.payload, item.oversize)
+
+    async def _shutdown(
+        self, periodic: asyncio.Task[None], consumer: asyncio.Task[None], offline: tuple[str, bytes]
+    ) -> None:
+        log.info("stopping: halting every motion first")
+        await asyncio.gather(*(a.stop_motion() for a in self.devices), return_exceptions=True)
+        consumer.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await consumer
+        await periodic
+        if self.dispatcher is not None:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.dispatcher.drain(), 2.0)
+        if self.bridge is not None:
+            await asyncio.to_thread(self.bridge.stop, offline)
+        await asyncio.gather(*(a.stop() for a in self.devices), return_exceptions=True)
+        log.info("stopped")

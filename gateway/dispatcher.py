@@ -1,0 +1,427 @@
+"""The dispatcher: every message from the cloud gets exactly one well-formed answer, or a counted,
+logged reason why none is possible.
+
+Owns the Cloud API request flow: topic → kind, validation through the contract's registry, the
+duplicate-``tid`` reply cache, routing to the adapter that owns the device, the control-authority
+rules, the per-request deadline, and the mapping of adapter failures to result codes. It knows
+Cloud API methods, never bytes; it publishes through an :class:`Outbox` and never blocks on it.
+A handler that raises is caught here, counted, and answered with 599001; nothing propagates to
+the MQTT thread or stops the loop (a peer gateway is known to go deaf after one such exception).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import re
+from collections import OrderedDict
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from pydantic import BaseModel, ValidationError
+
+from adapters.base import (
+    Adapter,
+    CallResult,
+    DeviceError,
+    DeviceNotConnected,
+    DeviceRejected,
+    DeviceTimeout,
+    InvalidParameters,
+    MethodNotSupported,
+)
+from gateway.clock import Clock
+from gateway.devices import DeviceTable
+from gateway.metrics import Metrics
+from gateway.settings import DispatcherSettings
+from schemas import (
+    ResultCode,
+    TopicError,
+    TopicKind,
+    error_reply_from_validation,
+    parse_topic,
+    property_set_reply,
+    reply_for,
+    topic,
+)
+from schemas.envelope import ErrorOutput, ResultReply, ServicesReplyMessage
+from schemas.registry import Registry
+
+log = logging.getLogger(__name__)
+
+__all__ = ["FLIGHT_METHODS", "Dispatcher", "Outbox"]
+
+#: Services that move the aircraft: they need flight authority when ``require_authority`` is on.
+FLIGHT_METHODS = frozenset({"takeoff_to_point", "fly_to_point", "fly_to_point_stop", "drc_mode_enter"})
+#: Services handled by the dispatcher itself rather than routed to one adapter's handler.
+_AUTHORITY_METHODS = frozenset({"flight_authority_grab", "payload_authority_grab"})
+
+_TID = re.compile(rb'"tid"\s*:\s*"([^"\\]{1,128})"')
+_BID = re.compile(rb'"bid"\s*:\s*"([^"\\]{1,128})"')
+_METHOD = re.compile(rb'"method"\s*:\s*"([a-z][a-z0-9_]{0,63})"')
+
+
+class Outbox(Protocol):
+    def publish(self, topic: str, payload: bytes, qos: int = 1, retain: bool = False) -> bool: ...
+
+
+@dataclass
+class _Cached:
+    expires: float
+    payload: bytes | None  # None while the first copy is still in flight
+    waiters: list[asyncio.Future[bytes]]
+
+
+class Dispatcher:
+    def __init__(
+        self,
+        *,
+        gateway_sn: str,
+        registry: Registry,
+        devices: DeviceTable,
+        outbox: Outbox,
+        settings: DispatcherSettings,
+        clock: Clock,
+        metrics: Metrics,
+        on_authority_change: Callable[[], None] | None = None,
+        on_events_reply: Callable[[str, int], None] | None = None,
+        drc_handler: Callable[[bytes], Awaitable[None]] | None = None,
+    ) -> None:
+        self.gateway_sn = gateway_sn
+        self.registry = registry
+        self.devices = devices
+        self.outbox = outbox
+        self.settings = settings
+        self.clock = clock
+        self.metrics = metrics
+        self.on_authority_change = on_authority_change
+        self.on_events_reply = on_events_reply
+        self.drc_handler = drc_handler
+        self._replies: OrderedDict[str, _Cached] = OrderedDict()
+        self._pending = 0
+        self._tasks: set[asyncio.Task[None]] = set()
+
+    # -- entry points ---------------------------------------------------------------------------
+    def submit(self, topic_name: str, payload: bytes, oversize: bool = False) -> None:
+        """Start handling one message in its own task, so a slow device delays nobody else."""
+        task = asyncio.get_running_loop().create_task(self.handle(topic_name, payload, oversize))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def drain(self) -> None:
+        """Wait for every message in flight (shutdown, tests)."""
+        while self._tasks:
+            await asyncio.gather(*list(self._tasks), return_exceptions=True)
+
+    async def handle(self, topic_name: str, payload: bytes, oversize: bool = False) -> None:
+        """Handle one message; never raises."""
+        try:
+            await self._handle(topic_name, payload, oversize)
+        except Exception:
+            self.metrics.inc("handler_exceptions_total", where="dispatcher")
+            log.exception("unexpected error while handling a message on %s", topic_name[:200])
+            with contextlib.suppress(Exception):
+                self._reply_raw(payload, ResultCode.INTERNAL_ERROR, "internal error in the gateway")
+
+    async def _handle(self, topic_name: str, payload: bytes, oversize: bool) -> None:
+        try:
+            kind, sn = parse_topic(topic_name)
+        except TopicError as exc:
+            self.metrics.inc("inbound_rejected_total", reason="topic")
+            log.warning("ignored a message on an unknown topic: %s", exc)
+            return
+        if sn != self.gateway_sn:
+            self.metrics.inc("inbound_rejected_total", reason="foreign_sn")
+            log.warning("ignored %s for another gateway", kind.value)
+            return
+        if oversize:
+            self.metrics.inc("inbound_rejected_total", reason="oversize")
+            log.warning("refused an oversize %s payload", kind.value)
+            if kind is TopicKind.SERVICES:
+                self._reply_raw(payload, ResultCode.INVALID_PARAMETERS, "payload too large")
+            return
+        if kind is TopicKind.SERVICES:
+            await self._services(payload)
+        elif kind is TopicKind.EVENTS_REPLY:
+            self._events_reply(payload)
+        elif kind is TopicKind.PROPERTY_SET:
+            self._property_set(payload)
+        elif kind is TopicKind.DRC_DOWN:
+            if self.drc_handler is not None:
+                await self.drc_handler(payload)
+            else:
+                self.metrics.inc("inbound_rejected_total", reason="drc_not_entered")
+        elif kind in (TopicKind.STATUS_REPLY, TopicKind.REQUESTS_REPLY):
+            self._cloud_answer(kind, payload)
+        else:
+            self.metrics.inc("inbound_rejected_total", reason="direction")
+            log.warning("ignored a message on %s (the gateway publishes there)", kind.value)
+
+    # -- services -------------------------------------------------------------------------------
+    async def _services(self, payload: bytes) -> None:
+        try:
+            request = self.registry.validate(TopicKind.SERVICES, payload)
+        except ValidationError as exc:
+            reply = error_reply_from_validation(
+                TopicKind.SERVICES, payload, exc, timestamp=self.clock.time_ms(), gateway=self.gateway_sn
+            )
+            method = _peek(_METHOD, payload) or "?"
+            self.metrics.inc("services_total", method=_metric_method(method), result=_result_of(reply))
+            if reply is None:
+                if not self._reply_raw(payload, ResultCode.INVALID_PARAMETERS, "malformed message"):
+                    self.metrics.inc("inbound_rejected_total", reason="unanswerable")
+                    log.warning("services message without a readable tid/bid/method: not answered")
+            else:
+                log.info("rejected %s: %s", method, _reason_of(reply))
+                self._publish_reply(reply.model_dump_json().encode(), None)
+            return
+
+        tid = request.tid
+        cached = self._cache_lookup(tid)
+        if cached is not None:
+            self.metrics.inc("services_duplicates_total")
+            if cached.payload is not None:
+                self._publish_reply(cached.payload, None)
+            else:
+                fut: asyncio.Future[bytes] = asyncio.get_running_loop().create_future()
+                cached.waiters.append(fut)
+                self._publish_reply(await fut, None)
+            return
+        entry = self._cache_open(tid)
+
+        started = self.clock.monotonic()
+        result, output = await self._execute(request)
+        reply = reply_for(
+            request, int(result), output, timestamp=self.clock.time_ms(), gateway=self.gateway_sn
+        )
+        raw = reply.model_dump_json().encode()
+        self.metrics.inc("services_total", method=_metric_method(request.method), result=int(result))
+        self.metrics.observe("services_latency_seconds", self.clock.monotonic() - started)
+        self._publish_reply(raw, entry)
+
+    async def _execute(self, request: Any) -> tuple[int, dict[str, Any] | None]:
+        method: str = request.method
+        data = request.data
+        if self._pending >= self.settings.max_pending:
+            return ResultCode.BUSY, {"reason": "too many requests in flight"}
+        self._pending += 1
+        try:
+            if method in _AUTHORITY_METHODS:
+                return await self._grab_authority(method, data)
+            adapter, problem = self._route(method, data)
+            if adapter is None:
+                return problem
+            denied = self._authority_check(method, data, adapter)
+            if denied is not None:
+                return denied
+            return await self._call(adapter, method, data)
+        finally:
+            self._pending -= 1
+
+    def _route(self, method: str, data: Any) -> tuple[Adapter | None, tuple[int, dict[str, Any] | None]]:
+        index = getattr(data, "payload_index", None)
+        if isinstance(index, str):
+            adapter = self.devices.by_payload(index)
+            if adapter is None:
+                known = ", ".join(self.devices.payload_indexes()) or "none"
+                return None, (
+                    ResultCode.INVALID_PARAMETERS,
+                    {"reason": f"no payload {index} (known: {known})"},
+                )
+            if not adapter.supports(method):
+                return None, (
+                    ResultCode.METHOD_NOT_SUPPORTED,
+                    {"reason": f"{method} not supported by {index}"},
+                )
+            return adapter, (0, None)
+        sn = getattr(data, "sn", None)
+        if isinstance(sn, str):
+            adapter = self.devices.by_sn(sn)
+            if adapter is None:
+                return None, (ResultCode.INVALID_PARAMETERS, {"reason": "unknown device sn"})
+            return adapter, (0, None)
+        serving = self.devices.serving(method)
+        if not serving:
+            return None, (ResultCode.METHOD_NOT_SUPPORTED, {"reason": f"no device here supports {method}"})
+        return serving[0], (0, None)
+
+    def _authority_check(self, method: str, data: Any, adapter: Adapter) -> tuple[int, dict[str, Any]] | None:
+        if not self.settings.require_authority:
+            return None
+        if method in FLIGHT_METHODS and adapter.info.sn not in self.devices.authority.flight:
+            return ResultCode.NO_FLIGHT_AUTHORITY, {"reason": "grab flight authority first"}
+        index = getattr(data, "payload_index", None)
+        if isinstance(index, str) and index not in self.devices.authority.payloads:
+            return ResultCode.NO_PAYLOAD_AUTHORITY, {"reason": "grab payload authority first"}
+        return None
+
+    async def _grab_authority(self, method: str, data: Any) -> tuple[int, dict[str, Any] | None]:
+        auth = self.devices.authority
+        if method == "payload_authority_grab":
+            index = data.payload_index
+            adapter = self.devices.by_payload(index)
+            if adapter is None:
+                known = ", ".join(self.devices.payload_indexes()) or "none"
+                return ResultCode.INVALID_PARAMETERS, {"reason": f"no payload {index} (known: {known})"}
+            if adapter.supports(method):  # a device that must be asked (e.g. an aircraft's gimbal)
+                result, output = await self._call(adapter, method, data)
+                if result != 0:
+                    return result, output
+            changed = index not in auth.payloads
+            auth.payloads.add(index)
+        else:
+            serving = self.devices.serving(method)
+            if not serving:
+                return ResultCode.METHOD_NOT_SUPPORTED, {"reason": "no aircraft on this gateway"}
+            adapter = serving[0]
+            result, output = await self._call(adapter, method, data)
+            if result != 0:
+                return result, output
+            changed = adapter.info.sn not in auth.flight
+            auth.flight.add(adapter.info.sn)
+        if changed and self.on_authority_change is not None:
+            self.on_authority_change()
+        return ResultCode.SUCCESS, None
+
+    async def _call(self, adapter: Adapter, method: str, data: Any) -> tuple[int, dict[str, Any] | None]:
+        sn = adapter.info.sn
+        if not adapter.online:
+            return ResultCode.DEVICE_NOT_CONNECTED, {"reason": f"device {sn} is not connected"}
+        try:
+            outcome: CallResult = await asyncio.wait_for(
+                adapter.call(method, data), timeout=self.settings.request_timeout
+            )
+        except TimeoutError:
+            self.metrics.inc("device_timeouts_total", device=sn)
+            return ResultCode.DEVICE_TIMEOUT, {"reason": f"device {sn} did not answer in time"}
+        except DeviceRejected as exc:
+            return exc.result, {"reason": str(exc)[:300]}
+        except DeviceNotConnected as exc:
+            return ResultCode.DEVICE_NOT_CONNECTED, {"reason": str(exc)[:300]}
+        except DeviceTimeout as exc:
+            self.metrics.inc("device_timeouts_total", device=sn)
+            return ResultCode.DEVICE_TIMEOUT, {"reason": str(exc)[:300]}
+        except InvalidParameters as exc:
+            return ResultCode.INVALID_PARAMETERS, {"reason": str(exc)[:300]}
+        except MethodNotSupported as exc:
+            return ResultCode.METHOD_NOT_SUPPORTED, {"reason": str(exc)[:300]}
+        except DeviceError as exc:
+            return ResultCode.BUSY, {"reason": str(exc)[:300]}
+        except Exception:
+            self.metrics.inc("handler_exceptions_total", where=f"adapter:{sn}")
+            log.exception("adapter %s failed on %s", sn, method)
+            return ResultCode.INTERNAL_ERROR, {"reason": "internal error in the device adapter"}
+        output = dict(outcome.output) if outcome.output is not None else None
+        return outcome.result, output
+
+    # -- duplicate tid cache --------------------------------------------------------------------
+    def _cache_lookup(self, tid: str) -> _Cached | None:
+        now = self.clock.monotonic()
+        while self._replies:
+            oldest_tid, oldest = next(iter(self._replies.items()))
+            if oldest.expires > now or oldest.payload is None:
+                break
+            del self._replies[oldest_tid]
+        return self._replies.get(tid)
+
+    def _cache_open(self, tid: str) -> _Cached:
+        entry = _Cached(self.clock.monotonic() + self.settings.reply_cache_seconds, None, [])
+        self._replies[tid] = entry
+        while len(self._replies) > 10_000:
+            self._replies.popitem(last=False)
+        return entry
+
+    def _publish_reply(self, raw: bytes, entry: _Cached | None) -> None:
+        if entry is not None:
+            entry.payload = raw
+            entry.expires = self.clock.monotonic() + self.settings.reply_cache_seconds
+            for fut in entry.waiters:
+                if not fut.done():
+                    fut.set_result(raw)
+            entry.waiters.clear()
+        self.outbox.publish(topic(TopicKind.SERVICES_REPLY, self.gateway_sn), raw, qos=1)
+
+    def _reply_raw(self, payload: bytes, result: int, reason: str) -> bool:
+        """Answer a message that could not be parsed, when tid, bid and method can still be read."""
+        tid, bid, method = _peek(_TID, payload), _peek(_BID, payload), _peek(_METHOD, payload)
+        if not (tid and bid and method):
+            return False
+        reply = ServicesReplyMessage(
+            tid=tid,
+            bid=bid,
+            timestamp=self.clock.time_ms(),
+            gateway=self.gateway_sn,
+            method=method,
+            data=ResultReply(result=result, output=ErrorOutput(reason=reason)),
+        )
+        self._publish_reply(reply.model_dump_json().encode(), None)
+        return True
+
+    # -- other kinds ----------------------------------------------------------------------------
+    def _events_reply(self, payload: bytes) -> None:
+        try:
+            msg = self.registry.validate(TopicKind.EVENTS_REPLY, payload)
+        except ValidationError as exc:
+            self.metrics.inc("inbound_rejected_total", reason="events_reply")
+            log.warning("ignored a malformed events_reply (%d problems)", exc.error_count())
+            return
+        if self.on_events_reply is not None:
+            self.on_events_reply(msg.tid, msg.data.result)
+
+    def _property_set(self, payload: bytes) -> None:
+        try:
+            msg = self.registry.validate(TopicKind.PROPERTY_SET, payload)
+        except ValidationError as exc:
+            reply = error_reply_from_validation(
+                TopicKind.PROPERTY_SET, payload, exc, timestamp=self.clock.time_ms(), gateway=self.gateway_sn
+            )
+            if reply is not None:
+                self.outbox.publish(
+                    topic(TopicKind.PROPERTY_SET_REPLY, self.gateway_sn), reply.model_dump_json().encode()
+                )
+            return
+        # The seed's only property, drc_state, is read-only; nothing here is writable yet.
+        results = {name: int(ResultCode.INVALID_PARAMETERS) for name in msg.data}
+        reply = property_set_reply(msg, results, timestamp=self.clock.time_ms(), gateway=self.gateway_sn)
+        self.outbox.publish(
+            topic(TopicKind.PROPERTY_SET_REPLY, self.gateway_sn), reply.model_dump_json().encode()
+        )
+
+    def _cloud_answer(self, kind: TopicKind, payload: bytes) -> None:
+        try:
+            msg = self.registry.validate(kind, payload)
+        except ValidationError:
+            self.metrics.inc("inbound_rejected_total", reason=kind.slug)
+            return
+        if msg.data.result != 0:
+            log.warning("cloud answered %s %s with result %s", kind.value, msg.method, msg.data.result)
+
+
+def _peek(pattern: re.Pattern[bytes], payload: bytes) -> str | None:
+    m = pattern.search(payload[:4096])
+    if m is None:
+        return None
+    try:
+        return m.group(1).decode()
+    except UnicodeDecodeError:
+        return None
+
+
+def _metric_method(method: str) -> str:
+    # unknown methods come from the cloud: bound the label set
+    return method if len(method) <= 64 and method.replace("_", "").isalnum() else "?"
+
+
+def _result_of(reply: BaseModel | None) -> int:
+    if reply is None:
+        return int(ResultCode.INVALID_PARAMETERS)
+    data = getattr(reply, "data", None)
+    return int(getattr(data, "result", ResultCode.INVALID_PARAMETERS))
+
+
+def _reason_of(reply: BaseModel) -> str:
+    data = getattr(reply, "data", None)
+    output = getattr(data, "output", None)
+    return str(getattr(output, "reason", ""))

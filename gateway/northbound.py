@@ -1,0 +1,255 @@
+"""Everything the gateway publishes on its own initiative: topology, state, periodic osd, events.
+
+Owns the Cloud API shape of device reports (validated against the contract before they leave, so
+an adapter bug cannot put an undefined field on the wire), the osd schedule (0.5 Hz by default, per
+device override), ``update_topo`` on every (re)connect and on every online/offline change, and
+the re-sending of events that asked for an ``events_reply``. Implements the adapters'
+:class:`~adapters.base.TelemetrySink`. Knows nothing about bytes or paho.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import secrets
+import uuid
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from pydantic import ValidationError
+
+from adapters.base import Adapter
+from gateway.clock import Clock
+from gateway.devices import DeviceTable
+from gateway.dispatcher import Outbox
+from gateway.metrics import Metrics
+from gateway.settings import GatewaySettings
+from schemas import Profile, TopicKind, topic
+from schemas.registry import Registry
+
+log = logging.getLogger(__name__)
+
+__all__ = ["Northbound", "profile_of"]
+
+
+def profile_of(adapter: Adapter) -> Profile:
+    """The osd/state body a device publishes, from its Cloud API domain and family."""
+    if adapter.info.domain == "0":
+        return Profile.AIRCRAFT
+    if adapter.info.domain == "1":
+        return Profile.GIMBAL
+    return Profile.ROBOT
+
+
+@dataclass
+class _PendingEvent:
+    topic: str
+    payload: bytes
+    attempts_left: int
+    next_at: float
+
+
+class Northbound:
+    def __init__(
+        self,
+        *,
+        settings: GatewaySettings,
+        registry: Registry,
+        devices: DeviceTable,
+        outbox: Outbox,
+        clock: Clock,
+        metrics: Metrics,
+    ) -> None:
+        self.settings = settings
+        self.gateway_sn = settings.gateway_sn
+        self.registry = registry
+        self.devices = devices
+        self.outbox = outbox
+        self.clock = clock
+        self.metrics = metrics
+        self._events: dict[str, _PendingEvent] = {}
+        self._next_osd: dict[str, float] = {}
+        self._osd_period = {d.sn: (d.osd_period or settings.osd_period) for d in settings.devices}
+
+    # -- envelopes --------------------------------------------------------------------------------
+    def _ids(self) -> dict[str, Any]:
+        return {"tid": str(uuid.uuid4()), "bid": str(uuid.uuid4()), "timestamp": self.clock.time_ms()}
+
+    def _telemetry(self, kind: TopicKind, adapter: Adapter, data: Mapping[str, Any]) -> bytes | None:
+        cls = self.registry.telemetry_class(kind, profile_of(adapter))
+        try:
+            msg = cls.model_validate({**self._ids(), "gateway": self.gateway_sn, "data": dict(data)})
+        except ValidationError as exc:
+            self.metrics.inc("outbound_invalid_total", kind=kind.slug)
+            log.error("dropped an invalid %s from %s: %s", kind.value, adapter.info.sn, exc.errors()[:2])
+            return None
+        return msg.model_dump_json().encode()
+
+    # -- TelemetrySink ----------------------------------------------------------------------------
+    def osd(self, sn: str, data: Mapping[str, Any]) -> None:
+        adapter = self.devices.by_sn(sn)
+        if adapter is None:
+            return
+        raw = self._telemetry(TopicKind.OSD, adapter, data)
+        if raw is not None:
+            self.outbox.publish(topic(TopicKind.OSD, sn), raw, qos=0)
+            self.metrics.inc("osd_published_total", device=sn)
+
+    def state(self, sn: str, data: Mapping[str, Any]) -> None:
+        adapter = self.devices.by_sn(sn)
+        if adapter is None:
+            return
+        raw = self._telemetry(TopicKind.STATE, adapter, data)
+        if raw is not None:
+            self.outbox.publish(topic(TopicKind.STATE, sn), raw, qos=1)
+
+    def event(self, sn: str, method: str, data: Mapping[str, Any], need_reply: bool = False) -> None:
+        ids = self._ids()
+        try:
+            msg = self.registry.build(
+                TopicKind.EVENTS,
+                method,
+                dict(data),
+                gateway=self.gateway_sn,
+                need_reply=1 if need_reply else 0,
+                **ids,
+            )
+        except (ValidationError, KeyError) as exc:
+            self.metrics.inc("outbound_invalid_total", kind="events")
+            log.error("dropped an invalid %s event from %s: %s", method, sn, exc)
+            return
+        raw = msg.model_dump_json().encode()
+        name = topic(TopicKind.EVENTS, self.gateway_sn)
+        self.outbox.publish(name, raw, qos=1)
+        self.metrics.inc("events_published_total", method=method)
+        if need_reply and self.settings.dispatcher.event_retries > 0:
+            interval = self.settings.dispatcher.event_retry_interval
+            self._events[ids["tid"]] = _PendingEvent(
+                name, raw, self.settings.dispatcher.event_retries, self.clock.monotonic() + interval
+            )
+
+    def online_changed(self, sn: str, online: bool) -> None:
+        self.metrics.set("device_online", 1 if online else 0, device=sn)
+        log.info("device %s is %s", sn, "online" if online else "offline")
+        self.publish_topology()
+
+    # -- events_reply -----------------------------------------------------------------------------
+    def events_reply(self, tid: str, result: int) -> None:
+        if self._events.pop(tid, None) is not None and result != 0:
+            log.warning("cloud answered event %s with result %s", tid, result)
+
+    def retry_events(self) -> None:
+        now = self.clock.monotonic()
+        interval = self.settings.dispatcher.event_retry_interval
+        for tid, ev in list(self._events.items()):
+            if now < ev.next_at:
+                continue
+            if ev.attempts_left <= 0:
+                del self._events[tid]
+                self.metrics.inc("events_unanswered_total")
+                log.warning("event %s was never answered", tid)
+                continue
+            ev.attempts_left -= 1
+            ev.next_at = now + interval
+            self.outbox.publish(ev.topic, ev.payload, qos=1)
+            self.metrics.inc("events_resent_total")
+
+    # -- topology and state -----------------------------------------------------------------------
+    def topology(self, *, offline: bool = False) -> bytes:
+        """``update_topo`` with the online devices (none when ``offline``: the gateway is leaving)."""
+        p = self.settings.product
+        secret = p.device_secret.get_secret_value() if p.device_secret else ""
+        subs = []
+        if not offline:
+            for i, adapter in enumerate(self.devices):
+                if not adapter.online:
+                    continue
+                info = adapter.info
+                subs.append(
+                    {
+                        "sn": info.sn,
+                        "domain": info.domain,
+                        "type": info.type,
+                        "sub_type": info.sub_type,
+                        "index": chr(ord("A") + i % 26),
+                        "device_secret": _device_secret(self.settings, info.sn),
+                        "nonce": secrets.token_hex(8),
+                        "thing_version": info.thing_version,
+                    }
+                )
+        body = {
+            "domain": p.domain,
+            "type": p.type,
+            "sub_type": p.sub_type,
+            "device_secret": secret,
+            "nonce": secrets.token_hex(8),
+            "thing_version": p.thing_version,
+            "sub_devices": subs,
+        }
+        msg = self.registry.build(
+            TopicKind.STATUS, "update_topo", body, gateway=self.gateway_sn, **self._ids()
+        )
+        return msg.model_dump_json(context={"reveal_secrets": True}).encode()
+
+    def publish_topology(self) -> None:
+        self.outbox.publish(topic(TopicKind.STATUS, self.gateway_sn), self.topology(), qos=1)
+        self.metrics.inc("topology_published_total")
+
+    def publish_state(self, adapter: Adapter) -> None:
+        body = dict(adapter.state_snapshot() or {})
+        if profile_of(adapter) in (Profile.GIMBAL, Profile.AIRCRAFT):
+            auth = self.devices.authority
+            if adapter.info.payload_index:
+                held = adapter.info.payload_index in auth.payloads
+                body["payloads"] = [
+                    {
+                        "control_source": "A" if held else "",
+                        "payload_index": adapter.info.payload_index,
+                        "sn": adapter.info.sn,
+                    }
+                ]
+            if profile_of(adapter) is Profile.AIRCRAFT:
+                body.setdefault("control_source", "A" if adapter.info.sn in auth.flight else "")
+        if body:
+            self.state(adapter.info.sn, body)
+
+    def on_connected(self) -> None:
+        """After every (re)connect: topology first, then state, then osd (cloud stacks drop
+        telemetry from gateways they have not registered)."""
+        self.publish_topology()
+        for adapter in self.devices:
+            if adapter.online:
+                self.publish_state(adapter)
+        self._next_osd.clear()
+
+    def publish_due_osd(self) -> None:
+        now = self.clock.monotonic()
+        for adapter in self.devices:
+            sn = adapter.info.sn
+            if not adapter.online or now < self._next_osd.get(sn, 0.0):
+                continue
+            self._next_osd[sn] = now + self._osd_period.get(sn, self.settings.osd_period)
+            body = adapter.osd_snapshot()
+            if body:
+                self.osd(sn, body)
+
+    async def run(self, stop: asyncio.Event) -> None:
+        """The periodic part: osd schedule and event re-sends, every 50 ms."""
+        while not stop.is_set():
+            try:
+                self.publish_due_osd()
+                self.retry_events()
+            except Exception:
+                self.metrics.inc("handler_exceptions_total", where="northbound")
+                log.exception("periodic publishing failed")
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), 0.05)
+
+
+def _device_secret(settings: GatewaySettings, sn: str) -> str:
+    for d in settings.devices:
+        if d.sn == sn and d.product.device_secret is not None:
+            return d.product.device_secret.get_secret_value()
+    return ""

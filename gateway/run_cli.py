@@ -1,0 +1,161 @@
+"""``dji-gateway run`` and ``dji-gateway simulate``: start the service (optionally with in-process
+simulated devices) or one device simulator as its own process.
+
+Owns process concerns only: settings loading with one clear error line, logging set-up, signal
+handling (SIGTERM/SIGINT stop motion, publish offline, exit 0) and the ``--simulate`` wiring.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import logging
+import signal
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from gateway.settings import ConfigError, GatewaySettings, load_settings
+
+log = logging.getLogger(__name__)
+
+#: Serial numbers and payload index of the simulated devices behind ``--simulate`` (documented in the README).
+SIM_GATEWAY_SN = "DJIGW-SIM-0001"
+SIM_GIMBAL_SN = "RSDK-SIM-0001"
+SIM_GIMBAL_PAYLOAD_INDEX = "1001-0-0"
+
+
+class _JsonFormatter(logging.Formatter):
+    def format(self, record: logging.LogRecord) -> str:
+        out: dict[str, Any] = {
+            "ts": round(record.created, 3),
+            "level": record.levelname,
+            "logger": record.name,
+            "msg": record.getMessage(),
+        }
+        if record.exc_info:
+            out["exc"] = self.formatException(record.exc_info)
+        return json.dumps(out)
+
+
+def setup_logging(level: str, as_json: bool) -> None:
+    handler = logging.StreamHandler(sys.stderr)
+    if as_json:
+        handler.setFormatter(_JsonFormatter())
+    else:
+        handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s"))
+    root = logging.getLogger()
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+
+
+def simulated_settings(base: dict[str, Any]) -> dict[str, Any]:
+    """Add the in-process simulators' devices (virtual CAN bus) to a settings document."""
+    doc = dict(base)
+    doc.setdefault("gateway_sn", SIM_GATEWAY_SN)
+    devices = list(doc.get("devices", []))
+    devices.append(
+        {
+            "type": "rsdk",
+            "sn": SIM_GIMBAL_SN,
+            "payload_index": SIM_GIMBAL_PAYLOAD_INDEX,
+            "interface": "virtual",
+            "channel": f"djigw-sim-{SIM_GIMBAL_SN}",
+        }
+    )
+    doc["devices"] = devices
+    return doc
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    run = sub.add_parser("run", help="run the gateway service")
+    run.add_argument("--config", "-c", help="TOML config file (DJIGW_* environment variables override it)")
+    run.add_argument("--broker", help="broker URL, overrides the config (mqtt://host:port, mqtts://, ws://)")
+    run.add_argument("--simulate", action="store_true", help="add in-process simulated devices")
+    run.add_argument("--gateway-sn", help="gateway serial number, overrides the config")
+    run.add_argument("--log-json", action="store_true", help="one JSON object per log line")
+    run.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    run.set_defaults(handler=cmd_run)
+
+    sim = sub.add_parser("simulate", help="run one device simulator as its own process")
+    sim.add_argument("device", choices=("rsdk",))
+    sim.add_argument("args", nargs=argparse.REMAINDER, help="simulator options (see: simulate rsdk --help)")
+    sim.set_defaults(handler=cmd_simulate)
+
+
+def _settings_from(ns: argparse.Namespace) -> GatewaySettings:
+    overrides: dict[str, Any] = {}
+    if ns.broker:
+        overrides["broker"] = {"url": ns.broker}
+    if ns.gateway_sn:
+        overrides["gateway_sn"] = ns.gateway_sn
+    if ns.log_json:
+        overrides["log_json"] = True
+    if ns.log_level:
+        overrides["log_level"] = ns.log_level
+    if not ns.simulate:
+        return load_settings(ns.config, **overrides)
+    import tomllib
+    from pathlib import Path
+
+    base: dict[str, Any] = tomllib.loads(Path(ns.config).read_text()) if ns.config else {}
+    doc = simulated_settings(base)
+    for key, value in overrides.items():
+        doc[key] = {**doc.get(key, {}), **value} if isinstance(value, dict) else value
+    return load_settings(None, **doc)
+
+
+def cmd_run(ns: argparse.Namespace) -> int:
+    try:
+        settings = _settings_from(ns)
+    except ConfigError as exc:
+        print(f"dji-gateway: {exc}", file=sys.stderr)
+        return 2
+    except (OSError, ValueError) as exc:
+        print(f"dji-gateway: cannot read config: {exc}", file=sys.stderr)
+        return 2
+    setup_logging(settings.log_level, settings.log_json)
+    return asyncio.run(_run(settings, simulate=ns.simulate))
+
+
+async def _run(settings: GatewaySettings, *, simulate: bool) -> int:
+    from gateway.app import GatewayApp
+
+    sims: list[Any] = []
+    if simulate:
+        from adapters.rsdk.sim import GimbalCanSim
+
+        for d in settings.devices:
+            if d.type == "rsdk" and d.interface == "virtual":
+                sims.append(GimbalCanSim(interface="virtual", channel=d.channel).start())
+                log.info(
+                    "simulated gimbal %s (payload %s) on virtual CAN %s", d.sn, d.payload_index, d.channel
+                )
+    app = GatewayApp(settings)
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        with contextlib.suppress(NotImplementedError):
+            loop.add_signal_handler(sig, app.stop)
+    try:
+        await app.run()
+    finally:
+        for sim in sims:
+            sim.stop()
+    return 0
+
+
+def cmd_simulate(ns: argparse.Namespace) -> int:
+    setup_logging("INFO", False)
+    if ns.device == "rsdk":
+        from adapters.rsdk import sim
+
+        return sim.main(ns.args)
+    return 2  # pragma: no cover - argparse restricts the choices
+
+
+def main(argv: Sequence[str] | None = None) -> int:  # pragma: no cover - thin alias for python -m
+    from gateway.cli import main as cli_main
+
+    return cli_main(argv)

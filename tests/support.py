@@ -1,0 +1,197 @@
+"""Test helpers: a cloud-side paho client, the gateway in a background thread, waiting with deadlines."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import queue
+import threading
+import time
+import uuid
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import paho.mqtt.client as paho
+from paho.mqtt.enums import CallbackAPIVersion
+
+from adapters.base import Adapter
+from gateway.app import GatewayApp
+from gateway.settings import GatewaySettings, load_settings
+
+
+def wait_until(
+    predicate: Callable[[], Any], timeout: float = 5.0, interval: float = 0.01, what: str = ""
+) -> Any:
+    """Poll ``predicate`` until it returns something truthy; fail with ``what`` after ``timeout``."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout}s waiting for {what or predicate}")
+        time.sleep(interval)
+
+
+class CloudClient:
+    """What a cloud platform does: publish services, read replies, osd, state, events and topology."""
+
+    def __init__(self, url_host: str, port: int, gateway_sn: str, *, client_id: str | None = None) -> None:
+        self.gateway_sn = gateway_sn
+        self.messages: list[tuple[str, dict[str, Any] | None, bytes]] = []
+        self._lock = threading.Lock()
+        self._new = threading.Condition(self._lock)
+        self.client = paho.Client(
+            CallbackAPIVersion.VERSION2, client_id=client_id or f"cloud-{uuid.uuid4().hex[:8]}"
+        )
+        self.client.on_message = self._on_message
+        self._subscribed = threading.Event()
+        self.client.on_subscribe = lambda *a: self._subscribed.set()
+        self.client.connect(url_host, port, keepalive=30)
+        self.client.loop_start()
+        self.client.subscribe([("thing/product/#", 1), ("sys/product/#", 1)])
+        if not self._subscribed.wait(5):
+            raise AssertionError("cloud client could not subscribe")
+
+    def close(self) -> None:
+        self.client.disconnect()
+        self.client.loop_stop()
+
+    def _on_message(self, client: paho.Client, userdata: Any, msg: paho.MQTTMessage) -> None:
+        try:
+            body = json.loads(msg.payload)
+        except ValueError:
+            body = None
+        with self._new:
+            self.messages.append((msg.topic, body, bytes(msg.payload)))
+            self._new.notify_all()
+
+    def publish(self, topic: str, payload: bytes | str | dict[str, Any], qos: int = 1) -> None:
+        if isinstance(payload, dict):
+            payload = json.dumps(payload)
+        self.client.publish(topic, payload, qos=qos).wait_for_publish(5)
+
+    def find(
+        self, suffix: str, predicate: Callable[[dict[str, Any]], bool] = lambda b: True
+    ) -> list[dict[str, Any]]:
+        with self._lock:
+            return [b for t, b, _ in self.messages if t.endswith(suffix) and b is not None and predicate(b)]
+
+    def wait_for(
+        self,
+        suffix: str,
+        predicate: Callable[[dict[str, Any]], bool] = lambda b: True,
+        timeout: float = 5.0,
+        count: int = 1,
+    ) -> list[dict[str, Any]]:
+        deadline = time.monotonic() + timeout
+        with self._new:
+            while True:
+                found = [
+                    b for t, b, _ in self.messages if t.endswith(suffix) and b is not None and predicate(b)
+                ]
+                if len(found) >= count:
+                    return found
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise AssertionError(
+                        f"no {count} message(s) on *{suffix} within {timeout}s; got {len(found)}"
+                    )
+                self._new.wait(left)
+
+    def service(
+        self, method: str, data: dict[str, Any] | None = None, *, tid: str | None = None, timeout: float = 5.0
+    ) -> dict[str, Any]:
+        """Publish one service and return its reply (matched by tid)."""
+        tid = tid or str(uuid.uuid4())
+        bid = str(uuid.uuid4())
+        msg = {
+            "tid": tid,
+            "bid": bid,
+            "timestamp": int(time.time() * 1000),
+            "method": method,
+            "data": data or {},
+        }
+        self.publish(f"thing/product/{self.gateway_sn}/services", msg)
+        reply = self.wait_for("services_reply", lambda b: b.get("tid") == tid, timeout=timeout)[-1]
+        assert reply["bid"] == bid and reply["method"] == method, reply
+        return reply
+
+    def clear(self) -> None:
+        with self._lock:
+            self.messages.clear()
+
+
+class GatewayThread:
+    """The real gateway (GatewayApp) on its own event loop in a background thread."""
+
+    def __init__(self, settings: GatewaySettings, adapters: Sequence[Adapter] | None = None) -> None:
+        self.settings = settings
+        self._adapters = adapters
+        self.app: GatewayApp | None = None
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._main, name="gateway", daemon=True)
+
+    def _main(self) -> None:
+        try:
+            asyncio.run(self._run())
+        except BaseException as exc:  # surfaced by start()/stop()
+            self._error = exc
+            self._ready.set()
+
+    async def _run(self) -> None:
+        self.loop = asyncio.get_running_loop()
+        self.app = GatewayApp(self.settings, adapters=self._adapters)
+        task = asyncio.create_task(self.app.run())
+        await self.app.started.wait()
+        self._ready.set()
+        await task
+
+    def start(self, connected: bool = True) -> GatewayThread:
+        self._thread.start()
+        if not self._ready.wait(10):
+            raise AssertionError("gateway did not start")
+        if self._error:
+            raise self._error
+        if connected:
+            wait_until(
+                lambda: self.app and self.app.bridge and self.app.bridge.connected,
+                10,
+                what="broker connection",
+            )
+        return self
+
+    def call(self, fn: Callable[[], Any], timeout: float = 5.0) -> Any:
+        """Run ``fn`` on the gateway's loop and return its result."""
+        assert self.loop is not None
+        done: queue.Queue[Any] = queue.Queue()
+        self.loop.call_soon_threadsafe(lambda: done.put(fn()))
+        return done.get(timeout=timeout)
+
+    def stop(self, timeout: float = 10.0) -> None:
+        if self.app is not None and self.loop is not None and self._thread.is_alive():
+            self.loop.call_soon_threadsafe(self.app.stop)
+        self._thread.join(timeout)
+        if self._thread.is_alive():
+            raise AssertionError("gateway did not stop")
+        if self._error:
+            raise self._error
+
+    def __enter__(self) -> GatewayThread:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+def gateway_settings(broker_port: int, devices: list[dict[str, Any]], **extra: Any) -> GatewaySettings:
+    doc: dict[str, Any] = {
+        "gateway_sn": extra.pop("gateway_sn", "GW-TEST-1"),
+        "broker": {"url": f"mqtt://127.0.0.1:{broker_port}", "reconnect_min": 0.2, "reconnect_max": 1.0},
+        "devices": devices,
+        "osd_period": extra.pop("osd_period", 0.2),
+    }
+    doc.update(extra)
+    return load_settings(None, **doc)
