@@ -42,13 +42,16 @@ def build_adapters(settings: GatewaySettings) -> list[Adapter]:
     return adapters
 
 
-def build_registry(settings: GatewaySettings) -> Registry:
-    """The seed's methods plus the extension methods of every device family configured."""
+#: Every device family's extension services: (method, request model, reply model, summary).
+EXTENSIONS = (*RSDK_EXTENSIONS,)
+
+
+def build_registry() -> Registry:
+    """The seed's methods plus every device family's extension methods (the documented contract;
+    a method whose device is not configured is answered 399001)."""
     registry = default_registry()
-    families = {d.type for d in settings.devices}
-    if "rsdk" in families:
-        for method, data, reply, summary in RSDK_EXTENSIONS:
-            registry.register(TopicKind.SERVICES, method, data, reply, summary=summary)
+    for method, data, reply, summary in EXTENSIONS:
+        registry.register(TopicKind.SERVICES, method, data, reply, summary=summary)
     return registry
 
 
@@ -64,7 +67,7 @@ class GatewayApp:
         self.settings = settings
         self.clock = clock or SystemClock()
         self.metrics = metrics or Metrics()
-        self.registry = build_registry(settings)
+        self.registry = build_registry()
         self.devices = DeviceTable(adapters if adapters is not None else build_adapters(settings))
         self.stop_event = asyncio.Event()
         self.started = asyncio.Event()

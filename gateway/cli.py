@@ -31,14 +31,23 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _schema_export(ns: argparse.Namespace) -> int:
+    from gateway.app import build_registry
     from schemas import export
 
-    return export.main([ns.directory] if ns.directory else [])
+    return export.main([ns.directory] if ns.directory else [], registry=build_registry())
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    ns = parser.parse_args(argv)
+    ns, extra = parser.parse_known_args(argv)
+    if extra and getattr(ns, "accepts_fields", False):
+        # argparse stops filling a trailing positional once an option interrupts it:
+        # `encode rsdk cmd --seq 5 a=1 b=2` still means fields a and b
+        fields = [e for e in extra if "=" in e and not e.startswith("-")]
+        extra = [e for e in extra if e not in fields]
+        ns.fields = [*ns.fields, *fields]
+    if extra:
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
     return int(ns.handler(ns))
 
 

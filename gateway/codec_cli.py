@@ -133,7 +133,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     enc.add_argument("--can", action="store_true", help="rsdk: print the CAN split as ID#DATA lines")
     enc.add_argument("fields", nargs="*", help="field=value (JSON values; hex strings for bytes)")
     _family_options(enc)
-    enc.set_defaults(handler=lambda ns: run_encode(ns, sys.stdout, sys.stderr))
+    enc.set_defaults(handler=lambda ns: run_encode(ns, sys.stdout, sys.stderr), accepts_fields=True)
 
 
 def _family_options(p: argparse.ArgumentParser) -> None:

@@ -255,10 +255,13 @@ def _dump_json(value: Any) -> str:
     return json.dumps(value, indent=2, ensure_ascii=False) + "\n"
 
 
-def export(directory: Path) -> list[Path]:
-    """Write every document into ``directory``; return the files written (sorted)."""
+def export(directory: Path, registry: Registry | None = None) -> list[Path]:
+    """Write every document into ``directory``; return the files written (sorted).
+
+    ``registry`` defaults to the seed's methods; the gateway passes one that also holds every device
+    family's extension methods, which is what ``schemas/json`` is generated from."""
     directory = Path(directory)
-    registry = default_registry()
+    registry = registry if registry is not None else default_registry()
     messages = contract_messages(registry)
     texts: dict[str, str] = {message.path: _dump_json(message_schema(message)) for message in messages}
     texts["bundle.json"] = _dump_json(bundle_schema(messages))
@@ -278,14 +281,14 @@ def export(directory: Path) -> list[Path]:
     return written
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, registry: Registry | None = None) -> int:
     """``python -m schemas.export [DIR]``: write the contract documents (default ``schemas/json``)."""
     parser = argparse.ArgumentParser(
         prog="schema export", description="Write the Cloud API JSON Schemas and AsyncAPI."
     )
     parser.add_argument("directory", nargs="?", type=Path, default=DEFAULT_DIR, help="output directory")
     args = parser.parse_args(list(argv) if argv is not None else None)
-    written = export(args.directory)
+    written = export(args.directory, registry)
     print(f"wrote {len(written)} files to {args.directory}")
     return 0
 
