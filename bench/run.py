@@ -58,6 +58,7 @@ class Row:
     base_count: int | None = None
     min_rate: float | None = None
     min_ratio: float | None = None
+    max_over_base: float | None = None  # latency rows: ours may exceed the baseline by at most this
     unit: str = "frames/s"
     note: str = ""
 
@@ -74,12 +75,14 @@ class Row:
             parts.append(f">={self.min_rate:,.0f}/s")
         if self.min_ratio is not None:
             parts.append(f">={self.min_ratio:g}x")
+        if self.max_over_base is not None:
+            parts.append(f"<=base+{self.max_over_base:g}")
         return " & ".join(parts)
 
     @property
     def passed(self) -> bool | None:
         """None when the row has no target."""
-        if self.min_rate is None and self.min_ratio is None:
+        if self.min_rate is None and self.min_ratio is None and self.max_over_base is None:
             return None
         ok = True
         if self.min_rate is not None:
@@ -87,6 +90,8 @@ class Row:
         if self.min_ratio is not None:
             ratio = self.ratio
             ok = ok and ratio is not None and ratio >= self.min_ratio
+        if self.max_over_base is not None:
+            ok = ok and self.base_rate is not None and self.rate - self.base_rate <= self.max_over_base
         return ok
 
 
@@ -104,6 +109,7 @@ def _lazy(module: str, func: str = "run") -> Suite:
 # name -> callable(Config) -> rows. Later suites (end-to-end MQTT round trips) append here.
 SUITES: list[tuple[str, Suite]] = [
     ("codecs", _lazy("bench.codecs")),
+    ("e2e", _lazy("bench.e2e")),
 ]
 
 
@@ -185,7 +191,9 @@ def git_revision() -> str:
 def _num(x: float | None) -> str:
     if x is None:
         return "-"
-    return f"{x:,.0f}" if x >= 100 else f"{x:,.1f}"
+    if x >= 100:
+        return f"{x:,.0f}"
+    return f"{x:,.1f}" if x >= 10 else f"{x:,.3f}"
 
 
 def format_table(rows: Sequence[Row]) -> str:
