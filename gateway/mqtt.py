@@ -17,6 +17,7 @@ import logging
 import random
 import socket
 import ssl
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -86,6 +87,8 @@ class MqttBridge:
         self._name = name
         self._backoff = Backoff(settings.reconnect_min, settings.reconnect_max)
         self._connected = asyncio.Event()
+        self._subscribed = threading.Event()  # set once the broker acknowledged every subscription
+        self._sub_mid: int | None = None
         self._client = self._build_client(will)
         self._dropped_logged = 0
 
@@ -121,6 +124,7 @@ class MqttBridge:
         client.on_disconnect = self._on_disconnect
         client.on_connect_fail = self._on_connect_fail
         client.on_message = self._on_message
+        client.on_subscribe = self._on_subscribe
         client.on_socket_open = self._on_socket_open
         return client
 
@@ -188,8 +192,9 @@ class MqttBridge:
             return
         self._backoff.reset()
         client.reconnect_delay_set(self.settings.reconnect_min, self.settings.reconnect_min)
-        for topic, qos in self.subscriptions:
-            client.subscribe(topic, qos)
+        self._subscribed.clear()
+        if self.subscriptions:
+            _, self._sub_mid = client.subscribe(list(self.subscriptions))
         self._metrics.inc("mqtt_connects_total", link=self._name)
         self._metrics.set("mqtt_connected", 1, link=self._name)
         log.info(
@@ -200,7 +205,22 @@ class MqttBridge:
         )
         self._loop.call_soon_threadsafe(self._after_connect)
 
+    def _on_subscribe(self, client: paho.Client, userdata: Any, mid: int, reasons: Any, props: Any) -> None:
+        if mid != self._sub_mid:
+            return
+        refused = [r for r in reasons if getattr(r, "is_failure", False)]
+        if refused:
+            self._metrics.inc("mqtt_subscribe_refused_total", link=self._name)
+            log.error("broker %s refused %d subscription(s): %s", self._where(), len(refused), refused[0])
+        self._subscribed.set()
+
+    @property
+    def subscribed(self) -> bool:
+        """Connected, and the broker has acknowledged the subscriptions (ready to receive requests)."""
+        return self.connected and self._subscribed.is_set()
+
     def _on_disconnect(self, client: paho.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
+        self._subscribed.clear()
         self._metrics.set("mqtt_connected", 0, link=self._name)
         self._loop.call_soon_threadsafe(self._connected.clear)
         if reason.is_failure:

@@ -100,7 +100,12 @@ class CloudClient:
                 self._new.wait(left)
 
     def service(
-        self, method: str, data: dict[str, Any] | None = None, *, tid: str | None = None, timeout: float = 5.0
+        self,
+        method: str,
+        data: dict[str, Any] | None = None,
+        *,
+        tid: str | None = None,
+        timeout: float = 10.0,
     ) -> dict[str, Any]:
         """Publish one service and return its reply (matched by tid)."""
         tid = tid or str(uuid.uuid4())
@@ -189,9 +194,18 @@ class GatewayThread:
 def gateway_settings(broker_port: int, devices: list[dict[str, Any]], **extra: Any) -> GatewaySettings:
     doc: dict[str, Any] = {
         "gateway_sn": extra.pop("gateway_sn", "GW-TEST-1"),
-        "broker": {"url": f"mqtt://127.0.0.1:{broker_port}", "reconnect_min": 0.2, "reconnect_max": 1.0},
+        # a client id of its own: a gateway left over from a failed test must not fight this one
+        "broker": {
+            "url": f"mqtt://127.0.0.1:{broker_port}",
+            "reconnect_min": 0.2,
+            "reconnect_max": 1.0,
+            "client_id": f"djigw-test-{uuid.uuid4().hex[:8]}",
+        },
         "devices": devices,
         "osd_period": extra.pop("osd_period", 0.2),
     }
-    doc.update(extra)
+    for key, value in extra.items():
+        doc[key] = (
+            {**doc[key], **value} if isinstance(value, dict) and isinstance(doc.get(key), dict) else value
+        )
     return load_settings(None, **doc)

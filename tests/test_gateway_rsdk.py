@@ -50,8 +50,17 @@ class BusSniffer:
     def names(self) -> Counter[str]:
         return Counter(name for name, _ in list(self.commands))
 
-    def last(self, name: str) -> dict[str, Any]:
-        return next(f for n, f in reversed(list(self.commands)) if n == name)
+    def last(self, name: str, predicate: Any = None, timeout: float = 5.0) -> dict[str, Any]:
+        """The latest ``name`` command seen on the bus (waiting until one matches ``predicate``): the
+        sniffer hears the bus independently of the gimbal, so it may lag the reply by a moment."""
+
+        def find() -> dict[str, Any] | None:
+            for n, f in reversed(list(self.commands)):
+                if n == name:
+                    return f if predicate is None or predicate(f) else None
+            return None
+
+        return wait_until(find, timeout, what=f"{name} on the bus")
 
     def close(self) -> None:
         self._stop.set()
@@ -129,21 +138,23 @@ def test_every_gimbal_method(rig: dict[str, Any]) -> None:
         return reply
 
     ok("camera_photo_take")
-    assert model.photos == 1 and sniffer.last("camera_control")["camera_control_command"] == 0x0001
+    assert model.photos == 1
+    sniffer.last("camera_control", lambda f: f["camera_control_command"] == 0x0001)
 
     ok("camera_recording_start")
     assert model.recording
     _osd(cloud, lambda d: d["cameras"][0]["recording_state"] == 1)
     ok("camera_recording_stop")
-    assert not model.recording and sniffer.last("camera_control")["camera_control_command"] == 0x0004
+    assert not model.recording
+    sniffer.last("camera_control", lambda f: f["camera_control_command"] == 0x0004)
 
     ok("camera_mode_switch", camera_mode=1)
     _osd(cloud, lambda d: d["cameras"][0]["camera_mode"] == 1)
 
     # aim at the right edge of the view: yaw turns by half the horizontal field of view (70° → 35°)
     ok("camera_aim", camera_type="wide", locked=False, x=1.0, y=0.5)
-    sent = sniffer.last("position_control")
-    assert sent["yaw_angle"] == 350 and sent["pitch_angle"] == 0 and sent["ctrl_byte"] == 0x04
+    sent = sniffer.last("position_control", lambda f: f["yaw_angle"] == 350)
+    assert sent["pitch_angle"] == 0 and sent["ctrl_byte"] == 0x04
     wait_until(lambda: abs(model.yaw.angle - 35.0) < 0.5, 3, what="gimbal yaw at 35°")
     _osd(cloud, lambda d: abs(d["gimbal_yaw"] - 35.0) < 0.5)
 
@@ -152,21 +163,23 @@ def test_every_gimbal_method(rig: dict[str, Any]) -> None:
     ok("camera_screen_drag", locked=False, pitch_speed=20.0, yaw_speed=0.0)
     start_pitch = model.pitch.angle
     wait_until(lambda: model.pitch.angle > start_pitch + 3, 3, what="pitch moving up")
-    wait_until(lambda: sniffer.last("speed_control")["ctrl_byte"] == 0x08, 3, what="speed control released")
+    sniffer.last("speed_control", lambda f: f["ctrl_byte"] == 0x08)
     drag_frames = [f for n, f in sniffer.commands[-20:] if n == "speed_control"]
     assert sniffer.names()["speed_control"] - before >= 5  # first + refreshes + stop + release
     assert any(f["pitch_speed"] == 200 and f["ctrl_byte"] == 0x88 for f in drag_frames)
     assert drag_frames[-2] == {"yaw_speed": 0, "roll_speed": 0, "pitch_speed": 0, "ctrl_byte": 0x88}
+    wait_until(lambda: model.pitch.speed == 0.0 and model.speed_until == 0.0, 3, what="gimbal released")
     settled = model.pitch.angle
     time.sleep(0.3)
     assert abs(model.pitch.angle - settled) < 0.01  # nothing moves after the drag
 
     ok("gimbal_reset", reset_mode=0)
-    assert sniffer.last("recenter_selfie")["recenter_and_selfie_command"] == 0x01
+    sniffer.last("recenter_selfie", lambda f: f["recenter_and_selfie_command"] == 0x01)
     wait_until(lambda: max(abs(a) for a in model.attitude()) < 0.5, 3, what="recentred")
     ok("gimbal_reset", reset_mode=3)
-    sent = sniffer.last("position_control")
-    assert sent["ctrl_byte"] == 0x01 | 0x02 | 0x04 and sent["pitch_angle"] == -560
+    sniffer.last(
+        "position_control", lambda f: f["ctrl_byte"] == 0x01 | 0x02 | 0x04 and f["pitch_angle"] == -560
+    )
     wait_until(lambda: abs(model.pitch.angle + 56) < 0.5, 3, what="pitch down")
 
     zoom = cloud.service(
