@@ -20,8 +20,9 @@ Encryption (enc != 0: AES-256-ECB over the data, PROTOCOL-NOTES) is not implemen
 library has no AES and the default configuration is enc = 0. Encrypted frames decode to a
 :class:`~adapters.wire.stream.BadFrame` "encrypted frame, no key configured".
 
-The frame layer is deliberately built on ``adapters.wire`` only; ``adapters/rsdk`` has the same header
-and could share it (see the report).
+The header, both CRCs and the header checks are the R SDK's and live in ``adapters.wire.dji_frame``
+(shared with ``adapters/rsdk``); this module adds the OSDK rules (header-only frames, reserved bits
+zero, its minimum length and its wording of reasons) and :class:`Frame`.
 
 Owns: frame encode/decode, the stream rules, :class:`SessionTable` (sender: session allocation, the
 stored frame for retransmission, ACK matching, deadlines) and :class:`DuplicateFilter` (receiver).
@@ -30,11 +31,25 @@ Must not know command ids or payloads (``commands.py``) nor read a clock: time c
 
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass
 from enum import IntEnum
 
-from adapters.wire.crc import crc16_rsdk, crc32_rsdk
+from adapters.wire.dji_frame import (
+    BAD_HEADER_CRC,
+    BAD_SOF,
+    BAD_VERSION,
+    CRC32_LEN,
+    FLAG_BIT,
+    HEADER_LEN,
+    MAX_FRAME_LEN,
+    SOF,
+    TOO_SHORT,
+    HeaderRules,
+    build_frame,
+    crc32_ok,
+    header_crc_ok,
+    read_header,
+)
 from adapters.wire.stream import BadFrame, StreamDecoder
 
 __all__ = [
@@ -64,18 +79,12 @@ __all__ = [
     "encode_frame",
 ]
 
-SOF = 0xAA
-HEADER_LEN = 12
-CRC32_LEN = 4
-MAX_FRAME_LEN = 0x3FF  # what the 10-bit length field can say (notes: max 1024)
+# SOF, HEADER_LEN, CRC32_LEN and MAX_FRAME_LEN come from adapters.wire.dji_frame. MAX_FRAME_LEN is
+# 0x3FF, what the 10-bit length field can say (notes: max 1024).
 MIN_DATA_FRAME_LEN = HEADER_LEN + CRC32_LEN  # 16: a CRC32 with empty data, as OSDK's receiver accepts
 FIRST_REQUIRED_SESSION = 2
 LAST_SESSION = 31
 ENCRYPTED_REASON = "encrypted frame, no key configured"
-
-_HEAD = struct.Struct("<BHBB3sH")  # SOF, length|version, session|ack, padding|enc, reserved, seq
-_U16 = struct.Struct("<H")
-_U32 = struct.Struct("<I")
 
 
 class FrameError(ValueError):
@@ -124,12 +133,7 @@ def encode_frame(data: bytes | bytearray, *, session: int, seq: int, is_ack: boo
     length = HEADER_LEN if not data else HEADER_LEN + len(data) + CRC32_LEN
     if length > MAX_FRAME_LEN:
         raise FrameError(f"frame would be {length} bytes; the length field holds at most {MAX_FRAME_LEN}")
-    head = _HEAD.pack(SOF, length, session | (0x20 if is_ack else 0), 0, b"\0\0\0", seq)
-    head += _U16.pack(crc16_rsdk(head))
-    if not data:
-        return head
-    body = head + bytes(data)
-    return body + _U32.pack(crc32_rsdk(body))
+    return build_frame(session | (FLAG_BIT if is_ack else 0), 0, seq, data)
 
 
 def encode_command(cmd_set: int, cmd_id: int, payload: bytes | bytearray, session: int, seq: int) -> bytes:
@@ -144,43 +148,45 @@ def encode_ack(session: int, seq: int, ack_bytes: bytes | bytearray) -> bytes:
     return encode_frame(ack_bytes, session=session, seq=seq, is_ack=True)
 
 
-class FrameRules:
+class FrameRules(HeaderRules):
     """Receive validation for :class:`~adapters.wire.stream.StreamDecoder`: SOF, header CRC, version 0,
-    reserved bits and bytes zero, a possible length; then CRC32 and the encryption flag."""
+    reserved bits and bytes zero, a possible length (12, or 16 and more); then CRC32 and the
+    encryption flag. The header checks are the shared :class:`~adapters.wire.dji_frame.HeaderRules`."""
 
-    sof = SOF
-    header_len = HEADER_LEN
+    def __init__(self) -> None:
+        super().__init__(min_len=MIN_DATA_FRAME_LEN, header_only=True, reserved_zero=True)
 
     def frame_length(self, header: bytes) -> int | str:
         if header[0] != SOF:
-            return "sof"
-        if crc16_rsdk(header[:10]) != _U16.unpack_from(header, 10)[0]:
-            return "header crc"
-        word: int = _U16.unpack_from(header, 1)[0]
-        length, version = word & 0x3FF, word >> 10
-        if version:
-            return f"version {version}"
-        if header[3] & 0xC0 or header[5:8] != b"\0\0\0":
-            return "reserved bits set"
-        if length != HEADER_LEN and length < MIN_DATA_FRAME_LEN:
-            return f"bad length {length}"
-        return length
+            return BAD_SOF
+        n = super().frame_length(header)
+        if isinstance(n, str):
+            # Error path only. The shared checks run cheapest first; this receiver reports a bad
+            # header CRC ahead of anything else (every other field of such a header is noise), and
+            # says which version or length it saw.
+            if not header_crc_ok(header):
+                return BAD_HEADER_CRC
+            word = header[1] | (header[2] << 8)
+            if n == BAD_VERSION:
+                return f"version {word >> 10}"
+            if n == TOO_SHORT:
+                return f"bad length {word}"
+        return n
 
     def parse(self, frame: bytes) -> Frame | str:
         if len(frame) == HEADER_LEN:
             data = b""
         else:
-            if crc32_rsdk(frame[:-CRC32_LEN]) != _U32.unpack_from(frame, len(frame) - CRC32_LEN)[0]:
+            if not crc32_ok(frame):
                 return "frame crc"
             data = frame[HEADER_LEN:-CRC32_LEN]
-        enc, padding = frame[4] >> 5, frame[4] & 0x1F
+        h = read_header(frame)
+        enc, padding = h.enc >> 5, h.enc & 0x1F
         if enc:
             return ENCRYPTED_REASON
-        is_ack = bool(frame[3] & 0x20)
-        if not is_ack and len(data) < 2:
+        if not h.flag and len(data) < 2:
             return "command frame without CmdSet/CmdID"
-        seq = _U16.unpack_from(frame, 8)[0]
-        return Frame(frame[3] & 0x1F, is_ack, seq, bytes(data), enc, padding)
+        return Frame(h.type_bits, h.flag, h.seq, bytes(data), enc, padding)
 
 
 class Decoder(StreamDecoder[Frame]):

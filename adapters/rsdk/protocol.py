@@ -12,6 +12,10 @@ Frame layout (all little-endian)::
     12 data      CmdSet, CmdID, payload (latest reply form; legacy replies lack CmdSet/CmdID)
     -4 u32 CRC32 over everything before it
 
+The header, both CRCs and the header checks are shared with the Onboard SDK frame and live in
+``adapters.wire.dji_frame``; this module adds the R SDK rules (minimum lengths, data required, the
+reply formats) and :class:`Frame`.
+
 Owns the frame layer only: it must not know what a command's payload means (that is
 ``commands.py``), nor CAN (``can.py``), nor any I/O. Standard library and ``adapters.wire`` only.
 
@@ -25,11 +29,20 @@ bare return code, 17-byte frame). ``Frame.data`` always gives the raw data segme
 
 from __future__ import annotations
 
-import struct
-import zlib
 from dataclasses import dataclass
 
-from adapters.wire.crc import RSDK_CRC32_SEED, crc16_rsdk
+from adapters.wire.dji_frame import (
+    CRC32_LEN,
+    FLAG_BIT,
+    HEADER_LEN,
+    MAX_FRAME_LEN,
+    SOF,
+    TYPE_MASK,
+    HeaderRules,
+    build_frame,
+    crc16_fast,
+    crc32_ok,
+)
 from adapters.wire.stream import BadFrame, StreamDecoder
 
 __all__ = [
@@ -47,47 +60,14 @@ __all__ = [
     "encode_frame",
 ]
 
-SOF = 0xAA
-HEADER_LEN = 12
-CRC32_LEN = 4
-MAX_FRAME_LEN = 0x3FF  # the length field has 10 bits
+# SOF, HEADER_LEN, CRC32_LEN, MAX_FRAME_LEN and crc16_fast are adapters.wire.dji_frame's, re-exported.
 # A command frame always carries CmdSet and CmdID: 12 + 2 + 4. A legacy reply may be a bare return
 # code with no CmdSet/CmdID (ArduPilot's driver expects exactly 17 bytes for those), so replies may be
 # one byte shorter: a single minimum of 18 would drop every legacy position/speed reply.
 MIN_COMMAND_LEN = HEADER_LEN + 2 + CRC32_LEN
 MIN_REPLY_LEN = HEADER_LEN + 1 + CRC32_LEN
-REPLY_BIT = 0x20
+REPLY_BIT = FLAG_BIT
 DEFAULT_CMD_TYPE = 0x03  # "reply required" (what DJI's samples and real drivers send)
-
-# --- fast CRC16 ---------------------------------------------------------------------------------
-# The header CRC runs once per candidate SOF, so it is the hot spot of the decoder. The CRC register
-# is 16 bits wide, so two input bytes XOR-ed into it are fully shifted out by one 65536-entry table
-# step: half the Python-level iterations of the byte table. The table is derived from the shared
-# engine (crc16_rsdk with a zero register returns the byte table), and a test pins the equivalence.
-_T8 = [crc16_rsdk(bytes((i,)), 0) for i in range(256)]
-_T16 = [(_T8[x & 0xFF] >> 8) ^ _T8[((x >> 8) ^ _T8[x & 0xFF]) & 0xFF] for x in range(0x10000)]
-_CRC16_SEED = 0x3AA3
-_HDR_WORDS = struct.Struct("<6H").unpack_from
-_HEAD10_WORDS = struct.Struct("<5H").unpack_from
-_PACK_HEAD = struct.Struct("<BHBB3xH").pack_into
-# zlib inverts the register on entry and exit (see adapters.wire.crc). A reflected CRC without a final
-# xor leaves a zero register after its own little-endian value, so a valid frame hashes to 0: after
-# zlib's exit inversion that is 0xFFFFFFFF. No slicing off the trailing CRC needed.
-_Z_SEED = RSDK_CRC32_SEED ^ 0xFFFFFFFF
-_Z_OK = 0xFFFFFFFF
-_zcrc = zlib.crc32
-
-
-def crc16_fast(data: bytes | bytearray, crc: int = _CRC16_SEED) -> int:
-    """Same result as ``adapters.wire.crc.crc16_rsdk``, two bytes per table step."""
-    t = _T16
-    n = len(data)
-    even = n & ~1
-    for (w,) in struct.iter_unpack("<H", data[:even]):
-        crc = t[crc ^ w]
-    if n & 1:
-        crc = (crc >> 8) ^ _T8[(crc ^ data[-1]) & 0xFF]
-    return crc
 
 
 @dataclass(frozen=True, slots=True)
@@ -175,18 +155,7 @@ def encode(frame: Frame) -> bytes:
         raise ValueError(f"frame would be {n} bytes; the length field allows at most {MAX_FRAME_LEN}")
     if not data:
         raise ValueError("a frame needs a data segment")
-    buf = bytearray(n)
-    _PACK_HEAD(buf, 0, SOF, n, frame.cmd_type | (REPLY_BIT if frame.is_reply else 0), frame.enc, frame.seq)
-    t = _T16
-    c = _CRC16_SEED
-    for w in _HEAD10_WORDS(buf):
-        c = t[c ^ w]
-    buf[10] = c & 0xFF
-    buf[11] = c >> 8
-    buf[12 : n - 4] = data
-    crc32 = _zcrc(memoryview(buf)[: n - 4], _Z_SEED) ^ 0xFFFFFFFF
-    buf[n - 4 :] = crc32.to_bytes(4, "little")
-    return bytes(buf)
+    return build_frame(frame.cmd_type | (REPLY_BIT if frame.is_reply else 0), frame.enc, frame.seq, data)
 
 
 def encode_frame(
@@ -203,33 +172,23 @@ def encode_frame(
     return encode(Frame(cmd_set, cmd_id, bytes(payload), seq, cmd_type, is_reply, enc))
 
 
-class FrameRules:
+class FrameRules(HeaderRules):
     """The R SDK part of :class:`adapters.wire.stream.StreamDecoder`.
 
-    Header checks (cheapest first): version 0, length >= 18 (>= 17 for a reply, see MIN_REPLY_LEN),
-    CRC16. The 10-bit length field caps frames at 1023 bytes, so no maximum check is needed. Then
-    CRC32 at ``length``; an encrypted frame (ENC bits 7:5 != 0) is reported, not decoded: no gimbal
-    encrypts and we hold no key."""
+    Header checks (shared with the OSDK in :class:`adapters.wire.dji_frame.HeaderRules`, cheapest
+    first): version 0, length >= 18 (>= 17 for a reply, see MIN_REPLY_LEN), CRC16; reserved bits are
+    not checked and header-only frames do not exist. Then CRC32 at ``length``; an encrypted frame
+    (ENC bits 7:5 != 0) is reported, not decoded: no gimbal encrypts and we hold no key."""
 
     __slots__ = ()
-    sof = SOF
-    header_len = HEADER_LEN
 
-    def frame_length(self, header: bytes) -> int | str:
-        v = header[1] | (header[2] << 8)
-        if v > MAX_FRAME_LEN:
-            return "version not 0"
-        if v < MIN_COMMAND_LEN and (v < MIN_REPLY_LEN or not header[3] & REPLY_BIT):
-            return "length too short"
-        t = _T16
-        w0, w1, w2, w3, w4, w5 = _HDR_WORDS(header)
-        # CRC over bytes 0..11 including the stored CRC16 leaves a zero register when it matches
-        if t[t[t[t[t[t[w0 ^ _CRC16_SEED] ^ w1] ^ w2] ^ w3] ^ w4] ^ w5]:
-            return "header crc"
-        return v
+    def __init__(self) -> None:
+        super().__init__(
+            min_len=MIN_COMMAND_LEN, min_flagged_len=MIN_REPLY_LEN, header_only=False, reserved_zero=False
+        )
 
     def parse(self, frame: bytes) -> Frame | str:
-        if _zcrc(frame, _Z_SEED) != _Z_OK:
+        if not crc32_ok(frame):
             return "frame crc"
         enc = frame[4]
         if enc & 0xE0:
@@ -237,15 +196,17 @@ class FrameRules:
         ct = frame[3]
         n = len(frame)
         if n == MIN_REPLY_LEN:  # only reachable for replies: a bare legacy return code
-            return _make_frame(None, None, frame[12:13], frame[8] | (frame[9] << 8), ct & 0x1F, True, enc)
+            return _make_frame(
+                None, None, frame[12:13], frame[8] | (frame[9] << 8), ct & TYPE_MASK, True, enc
+            )
         # _make_frame inlined: this is the per-frame hot path
         f = _new_obj(Frame)
         _S0(f, frame[12])
         _S1(f, frame[13])
         _S2(f, frame[14 : n - 4])
         _S3(f, frame[8] | (frame[9] << 8))
-        _S4(f, ct & 0x1F)
-        _S5(f, ct & 0x20 != 0)
+        _S4(f, ct & TYPE_MASK)
+        _S5(f, ct & REPLY_BIT != 0)
         _S6(f, enc)
         return f
 
