@@ -95,6 +95,10 @@ class TelemetrySink(Protocol):
 
     def online_changed(self, sn: str, online: bool) -> None: ...
 
+    def authority_lost(self, sn: str) -> None:
+        """The device took flight control back (RC take-over): the cloud no longer holds it."""
+        ...
+
 
 Handler = Callable[[Any], Awaitable[CallResult]]
 
@@ -105,6 +109,8 @@ class Adapter(abc.ABC):
 
     info: DeviceInfo
     handlers: Mapping[str, Handler]
+    #: this device's request deadline (seconds); None: the dispatcher's default
+    deadline: float | None = None
 
     @property
     @abc.abstractmethod

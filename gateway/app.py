@@ -15,6 +15,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from adapters.base import Adapter
+from adapters.osdk.adapter import AircraftAdapter
+from adapters.osdk.extensions import EXTENSIONS as OSDK_EXTENSIONS
 from adapters.rsdk.adapter import GimbalAdapter
 from adapters.rsdk.extensions import EXTENSIONS as RSDK_EXTENSIONS
 from gateway.clock import Clock, SystemClock
@@ -37,13 +39,15 @@ def build_adapters(settings: GatewaySettings) -> list[Adapter]:
     for device in settings.devices:
         if device.type == "rsdk":
             adapters.append(GimbalAdapter(device))
+        elif device.type == "osdk":
+            adapters.append(AircraftAdapter(device))
         else:  # pragma: no cover - the settings union admits only known types
             raise ValueError(f"unknown device type {device.type!r}")
     return adapters
 
 
 #: Every device family's extension services: (method, request model, reply model, summary).
-EXTENSIONS = (*RSDK_EXTENSIONS,)
+EXTENSIONS = (*RSDK_EXTENSIONS, *OSDK_EXTENSIONS)
 
 
 def build_registry() -> Registry:

@@ -55,6 +55,8 @@ __all__ = ["FLIGHT_METHODS", "Dispatcher", "Outbox"]
 
 #: Services that move the aircraft: they need flight authority when ``require_authority`` is on.
 FLIGHT_METHODS = frozenset({"takeoff_to_point", "fly_to_point", "fly_to_point_stop", "drc_mode_enter"})
+#: No device may hold a reply longer than this: the reference cloud SDK resends after 3 s.
+MAX_DEADLINE = 2.8
 #: Services handled by the dispatcher itself rather than routed to one adapter's handler.
 _AUTHORITY_METHODS = frozenset({"flight_authority_grab", "payload_authority_grab"})
 
@@ -290,9 +292,8 @@ class Dispatcher:
         if not adapter.online:
             return ResultCode.DEVICE_NOT_CONNECTED, {"reason": f"device {sn} is not connected"}
         try:
-            outcome: CallResult = await asyncio.wait_for(
-                adapter.call(method, data), timeout=self.settings.request_timeout
-            )
+            deadline = min(adapter.deadline or self.settings.request_timeout, MAX_DEADLINE)
+            outcome: CallResult = await asyncio.wait_for(adapter.call(method, data), timeout=deadline)
         except TimeoutError:
             self.metrics.inc("device_timeouts_total", device=sn)
             return ResultCode.DEVICE_TIMEOUT, {"reason": f"device {sn} did not answer in time"}

@@ -135,6 +135,15 @@ class Northbound:
         log.info("device %s is %s", sn, "online" if online else "offline")
         self.publish_topology()
 
+    def authority_lost(self, sn: str) -> None:
+        auth = self.devices.authority
+        if sn in auth.flight:
+            auth.flight.discard(sn)
+            log.warning("device %s took flight authority back", sn)
+            adapter = self.devices.by_sn(sn)
+            if adapter is not None:
+                self.publish_state(adapter)
+
     # -- events_reply -----------------------------------------------------------------------------
     def events_reply(self, tid: str, result: int) -> None:
         if self._events.pop(tid, None) is not None and result != 0:

@@ -24,6 +24,7 @@ from pydantic import (
 from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
 
 from adapters.config import ProductSettings
+from adapters.osdk.config import OsdkDeviceSettings
 from adapters.rsdk.config import RsdkDeviceSettings
 
 __all__ = [
@@ -115,7 +116,7 @@ class DispatcherSettings(BaseModel):
     max_pending: int = Field(256, ge=1, description="requests in flight at once; more get 314000 busy")
 
 
-DeviceSettings = Annotated[RsdkDeviceSettings, Field(discriminator="type")]
+DeviceSettings = Annotated[RsdkDeviceSettings | OsdkDeviceSettings, Field(discriminator="type")]
 
 
 class GatewaySettings(BaseSettings):

@@ -1,0 +1,825 @@
+"""The Onboard SDK aircraft adapter: Cloud API flight methods → open-protocol commands on the UART;
+flight-data, mission-status and mission-event pushes → osd, state and progress events.
+
+Owns one flight controller: its :class:`~adapters.serial_link.SerialLink` (reopened when it fails),
+the session layer (sessions 2–31 with retransmission of the *same* frame and ACKs matched by
+session and seq, session 0 for movement control, ACKs for the FC's own frames and duplicate
+suppression on receive), activation at start-up, the telemetry state, the fly-to / take-off tasks
+that turn ground-station events into ``*_progress`` events, and the movement-control set-point the
+DRC layer streams. Knows nothing of MQTT; reports through a :class:`~adapters.base.TelemetrySink`.
+
+Mapping (see the README's table):
+
+===========================  ======================================================================
+Cloud API method             Onboard SDK commands
+===========================  ======================================================================
+flight_authority_grab        0x01 0x00 obtain (re-sent with a new seq while the FC says "in progress")
+fly_to_point                 0x03 0x10 init (degrees → radians, WGS84 height → height above take-off,
+                             ``max_speed`` → idle velocity), one 0x03 0x11 per point, 0x03 0x12 start;
+                             then ``fly_to_point_progress`` from the 0x02 0x04 events
+fly_to_point_stop            0x03 0x12 cancel → ``wayline_cancel``
+takeoff_to_point             0x01 0x01 take-off; once airborne a 2-point mission (straight up to
+                             ``security_takeoff_height``, then the target) with
+                             ``takeoff_to_point_progress`` events
+x_osdk_*                     the rest of seed 004 (extensions.py)
+===========================  ======================================================================
+
+Ground-station ACK codes map to 336000 + code (``schemas.results.ground_station_ack``) with the
+seed's text in ``output.reason``; control ACKs that mean "the RC owns the aircraft" map to 319030.
+Heights: the Cloud API's are WGS84 (``height``, ``target_height``); waypoints are relative to the
+take-off point, so the adapter subtracts the home altitude (telemetry ``altitude − height``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from adapters.base import (
+    Adapter,
+    CallResult,
+    DeviceInfo,
+    DeviceNotConnected,
+    DeviceRejected,
+    DeviceTimeout,
+    InvalidParameters,
+    TelemetrySink,
+)
+from adapters.osdk import commands as cmds
+from adapters.osdk.config import OsdkDeviceSettings
+from adapters.osdk.protocol import (
+    Decoder,
+    DuplicateFilter,
+    Frame,
+    SessionMode,
+    SessionsExhausted,
+    SessionTable,
+)
+from adapters.serial_link import LinkError, SerialLink
+from adapters.wire.layout import LayoutError
+from adapters.wire.stream import BadFrame
+from schemas.results import ResultCode, ground_station_ack
+
+log = logging.getLogger(__name__)
+
+__all__ = ["AircraftAdapter"]
+
+EARTH_RADIUS_M = 6_378_137.0
+OBTAIN_RETRIES = 5  # "in progress" answers before giving up
+ON_GROUND, IN_AIR = 1, 2
+CONTROL_OBTAINED, CONTROL_RELEASED = 0x0002, 0x0001
+CONTROL_IN_PROGRESS = (0x0003, 0x0004)
+CONTROL_RC_OWNS = (0x0000, 0x0005, 0x0006)
+TASK_TAKEOFF, TASK_LAND, TASK_GO_HOME = 1, 2, 6
+
+
+@dataclass
+class Telemetry:
+    """What the FC last told us, in Cloud API units (degrees, metres, m/s)."""
+
+    latitude: float | None = None
+    longitude: float | None = None
+    altitude: float | None = None  # WGS84 (m)
+    height: float | None = None  # above take-off (m)
+    velocity: tuple[float, float, float] | None = None  # north, east, up
+    attitude: tuple[float, float, float] | None = None  # roll, pitch, yaw (°)
+    gimbal: tuple[float, float, float] | None = None
+    flight: int | None = None  # 0 stopped, 1 on ground, 2 in air
+    display_mode: int | None = None
+    battery_percent: int | None = None
+    battery_voltage: int | None = None
+    battery_current: int | None = None
+
+    @property
+    def home_altitude(self) -> float | None:
+        if self.altitude is None or self.height is None:
+            return None
+        return self.altitude - self.height
+
+
+@dataclass
+class Task:
+    """A fly-to or take-off task in flight: which Cloud API event reports it, and where it is."""
+
+    kind: str  # "fly_to" | "takeoff"
+    task_id: str  # fly_to_id / flight_id
+    points: int
+    done: asyncio.Event = field(default_factory=asyncio.Event)
+    reached: int = -1
+    finished: bool = False
+    failed: int | None = None
+
+
+def _quat_to_euler(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:
+    """Roll, pitch, yaw in degrees from the FC's body-to-ground quaternion."""
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return (math.degrees(roll), math.degrees(pitch), math.degrees(yaw))
+
+
+class AircraftAdapter(Adapter):
+    def __init__(self, settings: OsdkDeviceSettings, *, now: Callable[[], float] = time.monotonic) -> None:
+        self.settings = settings
+        self.fw = settings.firmware
+        self.info = DeviceInfo(
+            sn=settings.sn,
+            domain=settings.product.domain,
+            type=settings.product.type,
+            sub_type=settings.product.sub_type,
+            thing_version=settings.product.thing_version,
+        )
+        self.deadline = settings.deadline
+        self._now = now
+        self._link: SerialLink | None = None
+        self._decoder = Decoder()
+        self._sessions = SessionTable()
+        self._dups = DuplicateFilter()
+        self._sink: TelemetrySink | None = None
+        self._tasks: list[asyncio.Task[None]] = []
+        self._stopping = False
+        self._online = False
+        self._last_heard = float("-inf")
+        self.activated = False
+        self.version: str | None = None
+        self.activation_error: str | None = None
+        self.telemetry = Telemetry()
+        self.has_control = False
+        self.mission: Task | None = None
+        self._mission_task: asyncio.Task[None] | None = None
+        self.late_acks = 0
+        self.handlers = {
+            "flight_authority_grab": self._grab,
+            "fly_to_point": self._fly_to_point,
+            "fly_to_point_stop": self._fly_to_point_stop,
+            "takeoff_to_point": self._takeoff_to_point,
+            **{method: self._extension(method) for method in _EXTENSION_CALLS},
+        }
+
+    # -- life cycle -------------------------------------------------------------------------------
+    @property
+    def online(self) -> bool:
+        return self._online
+
+    async def start(self, sink: TelemetrySink) -> None:
+        self._sink = sink
+        loop = asyncio.get_running_loop()
+        s = self.settings
+        self._link = SerialLink(
+            url=s.url,
+            baudrate=s.baudrate,
+            loop=loop,
+            on_bytes=self._on_bytes,
+            on_down=self._on_link_down,
+            options=s.serial_options,
+        )
+        self._tasks += [
+            loop.create_task(self._supervise(), name=f"osdk-{s.sn}-supervisor"),
+            loop.create_task(self._retransmit(), name=f"osdk-{s.sn}-sessions"),
+        ]
+
+    async def stop(self) -> None:
+        self._stopping = True
+        with contextlib.suppress(Exception):
+            await self.stop_motion()
+        if self.settings.release_on_stop and self.has_control and self._link is not None and self._link.up:
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(self.command("obtain_control", {"control": 0}), 1.0)
+        for task in [*self._tasks, self._mission_task]:
+            if task is not None:
+                task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        await asyncio.sleep(0.05)  # let the writer thread flush the last frames
+        if self._link is not None:
+            self._link.close()
+        self._fail_pending(DeviceNotConnected(f"aircraft {self.info.sn} adapter stopped"))
+
+    async def stop_motion(self) -> None:
+        """Failsafe: zero velocity with the stable bit (brake and hover), sent at once on session 0,
+        without waiting for anything; then what ``on_stop`` says (a mission in flight is cancelled)."""
+        self.send_movement(0.0, 0.0, 0.0, 0.0)
+        if self.mission is not None and not self.mission.finished:
+            with contextlib.suppress(Exception):
+                self._fire("wp_start_stop", {"start": 1})
+        if self.settings.on_stop == "land" and self.telemetry.flight == IN_AIR:
+            with contextlib.suppress(Exception):
+                self._fire("flight_task", {"command": TASK_LAND})
+        elif self.settings.on_stop == "go_home" and self.telemetry.flight == IN_AIR:
+            with contextlib.suppress(Exception):
+                self._fire("flight_task", {"command": TASK_GO_HOME})
+
+    # -- movement control (used by DRC) ------------------------------------------------------------
+    def send_movement(self, forward: float, right: float, up: float, yaw_rate: float) -> None:
+        """One 0x01 0x03 frame: body-frame velocities (m/s) and yaw rate (°/s), stable bit set, on
+        session 0 (no ACK). Raises LinkError when the link is down."""
+        flag = cmds.control_flag(
+            cmds.HORIZONTAL_VELOCITY, cmds.VERTICAL_VELOCITY, cmds.YAW_RATE, cmds.FRAME_BODY, stable=True
+        )
+        fields = {"flag": flag, "x": forward, "y": right, "z": up, "yaw": yaw_rate}
+        with contextlib.suppress(LinkError):
+            self._fire("movement_control", fields)
+
+    def emergency_brake(self) -> None:
+        with contextlib.suppress(LinkError):
+            self._fire("emergency_brake", {})
+
+    # -- link supervision -------------------------------------------------------------------------
+    async def _supervise(self) -> None:
+        s = self.settings
+        next_activation = 0.0
+        while not self._stopping:
+            link = self._link
+            assert link is not None
+            if not link.up:
+                try:
+                    await link.open()
+                    self._decoder.reset()
+                    self._dups.reset()
+                    self.activated = False
+                    next_activation = 0.0
+                except LinkError as exc:
+                    log.info("aircraft %s: %s; retrying in %.1fs", self.info.sn, exc, s.reopen_interval)
+                    self._set_online(False)
+                    await asyncio.sleep(s.reopen_interval)
+                    continue
+            now = self._now()
+            if not self.activated and now >= next_activation:
+                next_activation = now + 3.0
+                await self._activate()
+            if self._online and now - self._last_heard > s.silence_timeout:
+                log.warning("aircraft %s silent for %.1fs: offline", self.info.sn, now - self._last_heard)
+                self._set_online(False)
+                self.activated = False
+                next_activation = now
+            await asyncio.sleep(0.1)
+
+    async def _activate(self) -> None:
+        """Version, activation, broadcast rates: the FC ignores other command sets until activated."""
+        s = self.settings
+        try:
+            ver = await self.command("get_version", {"arbitrary": 0})
+            name = ver.fields.get("version_name")
+            if isinstance(name, bytes):
+                self.version = name.rstrip(b"\0").decode(errors="replace")
+            ack = await self.command(
+                "activate",
+                {"app_id": s.app_id, "api_level": s.api_level, "fw_version": s.activation_version},
+            )
+            code = ack.fields["ack"]
+            if code != 0:
+                text = cmds.ACTIVATION_ACK.get(code, "unknown code")
+                if self.activation_error != text:
+                    log.error("aircraft %s refused activation: %s (code %d)", self.info.sn, text, code)
+                self.activation_error = text
+                return
+            self.activation_error = None
+            await self.command("set_broadcast_frequency", {"frequency": list(s.frequencies)})
+            self.activated = True
+            log.info("aircraft %s activated (firmware %s)", self.info.sn, self.version or "?")
+        except (DeviceTimeout, DeviceNotConnected) as exc:
+            log.info("aircraft %s: activation pending: %s", self.info.sn, exc)
+        except DeviceRejected as exc:
+            log.warning("aircraft %s: activation step failed: %s", self.info.sn, exc)
+
+    async def _retransmit(self) -> None:
+        """Resend unanswered frames (same session, same seq) and fail those out of retries."""
+        while not self._stopping:
+            res = self._sessions.poll(self._now())
+            for frame in res.resend:
+                with contextlib.suppress(LinkError):
+                    self._write(frame)
+            for p in res.expired:
+                fut, name = p.tag  # type: ignore[misc]
+                if not fut.done():
+                    fut.set_exception(DeviceTimeout(f"aircraft {self.info.sn} did not acknowledge {name}"))
+            await asyncio.sleep(0.02)
+
+    def _on_link_down(self, reason: str) -> None:
+        self._set_online(False)
+        self.activated = False
+        self._fail_pending(DeviceNotConnected(f"aircraft {self.info.sn} serial link down"))
+
+    def _set_online(self, online: bool) -> None:
+        if online == self._online:
+            return
+        self._online = online
+        if self._sink is not None:
+            self._sink.online_changed(self.info.sn, online)
+
+    def _fail_pending(self, exc: Exception) -> None:
+        for p in self._sessions.clear():
+            fut, _ = p.tag  # type: ignore[misc]
+            if not fut.done():
+                fut.set_exception(exc)
+
+    # -- send -------------------------------------------------------------------------------------
+    def _write(self, frame: bytes) -> None:
+        if self._link is None:
+            raise LinkError("not started")
+        self._link.write(frame)
+
+    def _fire(self, name: str, fields: Mapping[str, Any]) -> None:
+        """Send a command without waiting for its ACK (session 0 commands, failsafe paths)."""
+        spec = cmds.spec_for(name, self.fw)
+        payload = cmds.encode_request(name, fields, self.fw)
+        sent = self._sessions.send(
+            spec.cmd_set, spec.cmd_id, payload, now=self._now(), mode=SessionMode.NO_ACK
+        )
+        self._write(sent.frame)
+
+    async def command(self, name: str, fields: Mapping[str, Any] | None = None) -> cmds.Message:
+        """Send one command and wait for its ACK (retransmitted per the command's session rules)."""
+        if self._link is None or not self._link.up:
+            raise DeviceNotConnected(f"aircraft {self.info.sn} is not connected")
+        spec = cmds.spec_for(name, self.fw)
+        try:
+            payload = cmds.encode_request(name, fields, self.fw)
+        except LayoutError as exc:
+            raise InvalidParameters(f"{name}: {exc}") from None
+        if spec.session == SessionMode.NO_ACK or not spec.ack:
+            self._fire(name, fields or {})
+            return cmds.Message(name, spec.cmd_set, spec.cmd_id, True, {})
+        fut: asyncio.Future[cmds.Message] = asyncio.get_running_loop().create_future()
+        try:
+            sent = self._sessions.send(
+                spec.cmd_set,
+                spec.cmd_id,
+                payload,
+                now=self._now(),
+                mode=spec.session,
+                timeout=spec.timeout,
+                retries=spec.retries,
+                tag=(fut, name),
+            )
+        except SessionsExhausted:
+            raise DeviceRejected(ResultCode.BUSY, "all Onboard SDK sessions are busy") from None
+        try:
+            self._write(sent.frame)
+        except LinkError as exc:
+            raise DeviceNotConnected(str(exc)) from None
+        return await fut
+
+    # -- receive ---------------------------------------------------------------------------------
+    def _on_bytes(self, data: bytes) -> None:
+        for item in self._decoder.feed(data):
+            if isinstance(item, BadFrame):
+                continue
+            try:
+                self._on_frame(item)
+            except Exception:  # one bad frame must not stop the link
+                log.exception("aircraft %s: failed to handle a frame", self.info.sn)
+
+    def _on_frame(self, frame: Frame) -> None:
+        if frame.is_ack:
+            p = self._sessions.on_ack(frame)
+            if p is None:
+                self.late_acks += 1  # late (after its deadline) or unknown: never matched to anything
+                return
+            fut, name = p.tag  # type: ignore[misc]
+            if fut.done():
+                return
+            try:
+                fut.set_result(cmds.decode_ack(name, frame.data, self.fw))
+            except LayoutError as exc:
+                fut.set_exception(DeviceRejected(ResultCode.BUSY, f"unreadable {name} ACK: {exc}"))
+            return
+        verdict = self._dups.check(frame)
+        if verdict.duplicate:
+            if verdict.resend is not None:
+                with contextlib.suppress(LinkError):
+                    self._write(verdict.resend)
+            return
+        if frame.cmd_set is None or frame.cmd_id is None:
+            return
+        try:
+            msg = cmds.decode_request(frame.cmd_set, frame.cmd_id, frame.payload, self.fw)
+        except (cmds.UnknownCommand, LayoutError):
+            msg = None
+        if frame.session >= 1:
+            with contextlib.suppress(LinkError, LayoutError):
+                ack_name = msg.name if msg is not None else "lost_authority_push"
+                self._write(self._dups.ack(frame, cmds.encode_ack_payload(ack_name, {"ack": 0}, self.fw)))
+        if msg is None:
+            return
+        handler = _PUSHES.get(msg.name)
+        if handler is not None:
+            handler(self, msg.fields)
+
+    def _on_flight_data(self, f: Mapping[str, Any]) -> None:
+        t = self.telemetry
+        pos = f.get("position")
+        if pos is not None:
+            t.latitude, t.longitude = math.degrees(pos["latitude"]), math.degrees(pos["longitude"])
+            t.altitude, t.height = float(pos["altitude"]), float(pos["height"])
+        vel = f.get("velocity")
+        if vel is not None:
+            t.velocity = (float(vel["x"]), float(vel["y"]), float(vel["z"]))
+        q = f.get("quaternion")
+        if q is not None:
+            t.attitude = _quat_to_euler(q["w"], q["x"], q["y"], q["z"])
+        gimbal = f.get("gimbal")
+        if gimbal is not None:
+            t.gimbal = (float(gimbal["roll"]), float(gimbal["pitch"]), float(gimbal["yaw"]))
+        status = f.get("status")
+        if status is not None:
+            t.flight = int(status["flight"])
+            t.display_mode = int(status.get("display_mode", 0))
+        battery = f.get("battery")
+        if battery is not None:
+            t.battery_percent = int(battery["percentage"])
+            t.battery_voltage = int(battery.get("voltage", 0))
+            t.battery_current = int(battery.get("current", 0))
+        self._last_heard = self._now()
+        if self.activated:
+            self._set_online(True)
+
+    def _on_status(self, f: Mapping[str, Any]) -> None:
+        task = self.mission
+        if task is None or f.get("mission_type") != 1:
+            return
+        err = int(f.get("error_notification", 0))
+        if err and not task.finished:
+            task.failed = ground_station_ack(err) if err < 1000 else ResultCode.BUSY
+            task.done.set()
+
+    def _on_event(self, f: Mapping[str, Any]) -> None:
+        task = self.mission
+        if task is None:
+            return
+        incident = f.get("incident_type")
+        if incident == 2:  # waypoint reached
+            index = int(f["waypoint_index"])
+            if index > task.reached:
+                task.reached = index
+                self._progress(task, "wayline_progress", index)
+        elif incident == 1:  # mission finished
+            task.finished = True
+            task.done.set()
+
+    def _on_lost_authority(self, f: Mapping[str, Any]) -> None:
+        log.warning("aircraft %s: the RC took control back (reason %s)", self.info.sn, f.get("reason"))
+        self.has_control = False
+        if self._sink is not None:
+            self._sink.authority_lost(self.info.sn)
+            self._sink.event(self.info.sn, "joystick_invalid_notify", {"reason": 4}, need_reply=True)
+
+    # -- telemetry out ----------------------------------------------------------------------------
+    def mode_code(self) -> int:
+        t = self.telemetry
+        if t.flight is None:
+            return 14  # not connected
+        if t.flight != IN_AIR:
+            return 0  # standby
+        if self.mission is not None and not self.mission.finished:
+            return 5  # wayline
+        return {11: 4, 12: 10, 15: 9, 33: 11, 17: 16}.get(t.display_mode or 0, 3)
+
+    def osd_snapshot(self) -> Mapping[str, Any] | None:
+        t = self.telemetry
+        if t.latitude is None:
+            return None
+        body: dict[str, Any] = {
+            "latitude": max(-90.0, min(90.0, t.latitude)),
+            "longitude": max(-180.0, min(180.0, t.longitude or 0.0)),
+            "height": t.altitude,
+            "elevation": t.height,
+            "mode_code": self.mode_code(),
+        }
+        if t.attitude is not None:
+            roll, pitch, yaw = t.attitude
+            body.update(attitude_roll=roll, attitude_pitch=pitch, attitude_head=yaw)
+        if t.velocity is not None:
+            north, east, up = t.velocity
+            body.update(horizontal_speed=math.hypot(north, east), vertical_speed=up)
+        if t.battery_percent is not None:
+            item: dict[str, Any] = {"index": 0, "capacity_percent": max(0, min(100, t.battery_percent))}
+            if t.battery_voltage:
+                item["voltage"] = max(0, t.battery_voltage)
+                item["x_current"] = t.battery_current
+            body["battery"] = {"capacity_percent": item["capacity_percent"], "batteries": [item]}
+        return body
+
+    def state_snapshot(self) -> Mapping[str, Any] | None:
+        return {"locked": False}
+
+    # -- Cloud API methods ------------------------------------------------------------------------
+    def _require_online(self) -> None:
+        if not self._online:
+            raise DeviceNotConnected(f"aircraft {self.info.sn} is not connected")
+
+    async def _gs(self, name: str, fields: Mapping[str, Any] | None = None) -> cmds.Message:
+        """A ground-station command whose ACK code 0 is success; others raise with the seed's text."""
+        msg = await self.command(name, fields)
+        code = int(msg.fields.get("ack", 0))
+        if code != 0:
+            text = cmds.GS_ACK_TEXT.get(code, "unknown ground-station ACK")
+            raise DeviceRejected(ground_station_ack(code), f"{name}: {text} (0x{code:02X})", {"ack": code})
+        return msg
+
+    async def _obtain(self, control: int) -> None:
+        for _ in range(OBTAIN_RETRIES):
+            msg = await self.command("obtain_control", {"control": control})
+            code = int(msg.fields["ack"])
+            if code in CONTROL_IN_PROGRESS:
+                await asyncio.sleep(0.1)
+                continue  # the FC wants the request again, with a new seq
+            if code == (CONTROL_OBTAINED if control else CONTROL_RELEASED):
+                self.has_control = bool(control)
+                return
+            text = cmds.CONTROL_ACK.get(code, "unknown control ACK")
+            result = ResultCode.NO_FLIGHT_AUTHORITY if code in CONTROL_RC_OWNS else ResultCode.BUSY
+            raise DeviceRejected(result, f"flight controller refused: {text} (0x{code:04X})")
+        raise DeviceRejected(ResultCode.BUSY, "flight controller still busy obtaining control")
+
+    async def _grab(self, data: Any) -> CallResult:
+        self._require_online()
+        await self._obtain(1)
+        return CallResult()
+
+    async def _flight_task(self, command: int) -> None:
+        msg = await self.command("flight_task", {"command": command})
+        code = int(msg.fields["ack"])
+        if code != 0:
+            text = cmds.FLIGHT_TASK_ACK.get(code, "unknown flight task ACK")
+            raise DeviceRejected(ResultCode.BUSY, f"flight task {command} refused: {text} ({code})")
+
+    def _relative(self, wgs84_height: float) -> float:
+        home = self.telemetry.home_altitude
+        if home is None:
+            raise DeviceRejected(ResultCode.BUSY, "no position from the aircraft yet")
+        return wgs84_height - home
+
+    async def _upload(self, points: list[tuple[float, float, float]], speed: float) -> None:
+        """init + one waypoint per point (lat/lon degrees, height above take-off)."""
+        s = self.settings
+        idle = max(1.0, min(float(speed), s.mission_vel_cmd_range))
+        init = {
+            "length": len(points),
+            "vel_cmd_range": s.mission_vel_cmd_range,
+            "idle_vel": idle,
+            "action_on_finish": 0,  # hover at the target: the Cloud API's default action
+            "mission_exec_num": 1,
+            "yaw_mode": 0,
+            "trace_mode": 0,
+            "action_on_rc_lost": 1,
+            "gimbal_pitch_mode": 0,
+        }
+        await self._gs("wp_init", init)
+        for index, (lat, lon, alt) in enumerate(points):
+            wp = {
+                "index": index,
+                "latitude": math.radians(lat),
+                "longitude": math.radians(lon),
+                "altitude": alt,
+                "action_time_limit": 100,
+            }
+            ack = await self._gs("wp_upload", wp)
+            if int(ack.fields.get("index", index)) != index:
+                raise DeviceRejected(
+                    ResultCode.BUSY, f"waypoint {index} acknowledged as {ack.fields.get('index')}"
+                )
+
+    def _progress(self, task: Task, status: str, index: int, result: int = 0) -> None:
+        if self._sink is None:
+            return
+        index = max(0, index)
+        if task.kind == "fly_to":
+            data = {"fly_to_id": task.task_id, "status": status, "result": result, "way_point_index": index}
+            self._sink.event(self.info.sn, "fly_to_point_progress", data, need_reply=True)
+        else:
+            data = {"flight_id": task.task_id, "track_id": "", "status": status, "result": result,
+                    "way_point_index": index}  # fmt: skip
+            self._sink.event(self.info.sn, "takeoff_to_point_progress", data, need_reply=True)
+
+    def _start_watch(self, task: Task) -> None:
+        if self._mission_task is not None and not self._mission_task.done():
+            self._mission_task.cancel()
+        self._mission_task = asyncio.get_running_loop().create_task(self._watch(task))
+
+    async def _watch(self, task: Task) -> None:
+        await task.done.wait()
+        if task.failed is not None:
+            self._progress(task, "wayline_failed", task.reached, task.failed)
+        elif task.finished:
+            self._progress(task, "wayline_ok", task.points - 1)
+            if task.kind == "takeoff":
+                self._progress(task, "task_finish", task.points - 1)
+
+    async def _fly_to_point(self, data: Any) -> CallResult:
+        self._require_online()
+        if data.max_speed <= 0:
+            raise InvalidParameters("max_speed must be at least 1 m/s to fly")
+        points = [(p.latitude, p.longitude, self._relative(p.height)) for p in data.points]
+        await self._upload(points, data.max_speed)
+        task = Task("fly_to", data.fly_to_id, len(points))
+        self.mission = task
+        await self._gs("wp_start_stop", {"start": 0})
+        self._start_watch(task)
+        return CallResult()
+
+    async def _fly_to_point_stop(self, data: Any) -> CallResult:
+        self._require_online()
+        await self._gs("wp_start_stop", {"start": 1})
+        task = self.mission
+        if task is not None and not task.finished:
+            task.finished = True  # no wayline_ok for a cancelled task
+            if self._mission_task is not None:
+                self._mission_task.cancel()
+            self._progress(task, "wayline_cancel", task.reached)
+        return CallResult()
+
+    async def _takeoff_to_point(self, data: Any) -> CallResult:
+        self._require_online()
+        if self.telemetry.flight == IN_AIR:
+            raise DeviceRejected(ResultCode.BUSY, "the aircraft is already in the air")
+        await self._flight_task(TASK_TAKEOFF)
+        task = Task("takeoff", data.flight_id, 2)
+        self.mission = task
+        self._progress(task, "task_ready", 0)
+        if self._mission_task is not None and not self._mission_task.done():
+            self._mission_task.cancel()
+        self._mission_task = asyncio.get_running_loop().create_task(self._takeoff_then_fly(task, data))
+        return CallResult()
+
+    async def _takeoff_then_fly(self, task: Task, data: Any) -> None:
+        """After the take-off ACK: wait until airborne, then fly up and over to the target."""
+        deadline = self._now() + self.settings.takeoff_timeout
+        t = self.telemetry
+        while not (t.flight == IN_AIR and (t.height or 0.0) >= 1.0):
+            if self._now() > deadline:
+                self._progress(task, "wayline_failed", 0, ResultCode.DEVICE_TIMEOUT)
+                return
+            await asyncio.sleep(0.1)
+        try:
+            climb = float(data.security_takeoff_height)
+            points = [
+                (t.latitude or 0.0, t.longitude or 0.0, climb),
+                (data.target_latitude, data.target_longitude, self._relative(data.target_height)),
+            ]
+            await self._upload(points, data.max_speed)
+            await self._gs("wp_start_stop", {"start": 0})
+        except DeviceRejected as exc:
+            self._progress(task, "wayline_failed", 0, exc.result)
+            return
+        except (DeviceTimeout, DeviceNotConnected):
+            self._progress(task, "wayline_failed", 0, ResultCode.DEVICE_TIMEOUT)
+            return
+        self._progress(task, "wayline_progress", 0)
+        await self._watch(task)
+
+    def _extension(self, method: str) -> Callable[[Any], Any]:
+        async def call(data: Any) -> CallResult:
+            self._require_online()
+            return await _EXTENSION_CALLS[method](self, data)
+
+        return call
+
+
+# -- extension services: method → coroutine(adapter, data) ---------------------------------------------
+
+
+async def _ext_pause(adapter: AircraftAdapter, name: str, data: Any) -> CallResult:
+    await adapter._gs(name, {"pause": 0 if data.pause else 1})
+    return CallResult()
+
+
+async def _ext_plain(
+    adapter: AircraftAdapter, name: str, fields: Mapping[str, Any] | None = None
+) -> CallResult:
+    await adapter._gs(name, fields or {"arbitrary": 0})
+    return CallResult()
+
+
+async def _ext_idle_set(adapter: AircraftAdapter, data: Any) -> CallResult:
+    msg = await adapter._gs("wp_set_idle_velocity", {"idle_velocity": data.velocity})
+    return CallResult(0, {"idle_velocity": float(msg.fields["idle_velocity"])})
+
+
+async def _ext_idle_get(adapter: AircraftAdapter, data: Any) -> CallResult:
+    msg = await adapter._gs("wp_get_idle_velocity", {"arbitrary": 0})
+    return CallResult(0, {"idle_velocity": float(msg.fields["idle_velocity"])})
+
+
+async def _ext_download(adapter: AircraftAdapter, data: Any) -> CallResult:
+    init = await adapter._gs("wp_download_init", {"arbitrary": 0})
+    points = []
+    for index in range(int(init.fields["length"])):
+        wp = await adapter._gs("wp_download_point", {"index": index})
+        f = wp.fields
+        points.append(
+            {
+                "index": int(f["index"]),
+                "latitude": math.degrees(f["latitude"]),
+                "longitude": math.degrees(f["longitude"]),
+                "altitude": float(f["altitude"]),
+            }
+        )
+    out = {
+        "length": int(init.fields["length"]),
+        "idle_velocity": float(init.fields["idle_vel"]),
+        "action_on_finish": int(init.fields["action_on_finish"]),
+        "points": points,
+    }
+    return CallResult(0, out)
+
+
+async def _ext_hotpoint(adapter: AircraftAdapter, data: Any) -> CallResult:
+    fields = {
+        "version": 0,
+        "hp_latitude": math.radians(data.latitude),
+        "hp_longitude": math.radians(data.longitude),
+        "hp_altitude": data.altitude,
+        "hp_radius": data.radius,
+        "angle_rate": data.angle_rate,
+        "is_clockwise": 1 if data.clockwise else 0,
+        "start_point_position": data.start_point,
+        "yaw_mode": data.yaw_mode,
+    }
+    msg = await adapter._gs("hp_upload_start", fields)
+    return CallResult(0, {"max_radius": float(msg.fields.get("max_radius", 0.0))})
+
+
+async def _ext_hotpoint_download(adapter: AircraftAdapter, data: Any) -> CallResult:
+    f = (await adapter._gs("hp_download", {"arbitrary": 0})).fields
+    out = {
+        "latitude": math.degrees(f["hp_latitude"]),
+        "longitude": math.degrees(f["hp_longitude"]),
+        "altitude": float(f["hp_altitude"]),
+        "radius": float(f["hp_radius"]),
+        "angle_rate": float(f["angle_rate"]),
+        "clockwise": bool(f["is_clockwise"]),
+    }
+    return CallResult(0, out)
+
+
+async def _ext_followme(adapter: AircraftAdapter, data: Any) -> CallResult:
+    fields = {
+        "follow_mode": 0,
+        "yaw_mode": 1 if data.point_to_target else 0,
+        "init_latitude": math.radians(data.latitude),
+        "init_longitude": math.radians(data.longitude),
+        "init_alti": data.altitude,
+    }
+    await adapter._gs("fm_upload_start", fields)
+    return CallResult()
+
+
+async def _ext_followme_target(adapter: AircraftAdapter, data: Any) -> CallResult:
+    fields = {"latitude": math.radians(data.latitude), "longitude": math.radians(data.longitude),
+              "altitude": data.altitude}  # fmt: skip
+    await adapter.command("fm_update_target", fields)  # no ACK: the send is the result
+    return CallResult()
+
+
+async def _ext_task(adapter: AircraftAdapter, command: int) -> CallResult:
+    await adapter._flight_task(command)
+    return CallResult()
+
+
+async def _ext_release(adapter: AircraftAdapter, data: Any) -> CallResult:
+    await adapter._obtain(0)
+    if adapter._sink is not None:
+        adapter._sink.authority_lost(adapter.info.sn)
+    return CallResult()
+
+
+_EXTENSION_CALLS: dict[str, Callable[[AircraftAdapter, Any], Any]] = {
+    "x_osdk_waypoint_pause": lambda a, d: _ext_pause(a, "wp_pause_resume", d),
+    "x_osdk_waypoint_idle_velocity_set": _ext_idle_set,
+    "x_osdk_waypoint_idle_velocity_get": _ext_idle_get,
+    "x_osdk_mission_download": _ext_download,
+    "x_osdk_hotpoint_start": _ext_hotpoint,
+    "x_osdk_hotpoint_stop": lambda a, d: _ext_plain(a, "hp_stop"),
+    "x_osdk_hotpoint_pause": lambda a, d: _ext_pause(a, "hp_pause_resume", d),
+    "x_osdk_hotpoint_velocity_set": lambda a, d: _ext_plain(
+        a, "hp_set_idle_velocity", {"is_clockwise": 1 if d.clockwise else 0, "idle_velocity": d.velocity}
+    ),
+    "x_osdk_hotpoint_radius_set": lambda a, d: _ext_plain(a, "hp_set_radius", {"radius": d.radius}),
+    "x_osdk_hotpoint_reset_yaw": lambda a, d: _ext_plain(a, "hp_reset_yaw"),
+    "x_osdk_hotpoint_download": _ext_hotpoint_download,
+    "x_osdk_hotpoint_auto_radius": lambda a, d: _ext_plain(
+        a, "hp_auto_radius", {"on_off": 1 if d.enable else 0, "rate": d.rate}
+    ),
+    "x_osdk_followme_start": _ext_followme,
+    "x_osdk_followme_stop": lambda a, d: _ext_plain(a, "fm_stop"),
+    "x_osdk_followme_pause": lambda a, d: _ext_pause(a, "fm_pause_resume", d),
+    "x_osdk_followme_target": _ext_followme_target,
+    "x_osdk_land": lambda a, d: _ext_task(a, TASK_LAND),
+    "x_osdk_go_home": lambda a, d: _ext_task(a, TASK_GO_HOME),
+    "x_osdk_authority_release": _ext_release,
+}
+
+_PUSHES: dict[str, Callable[[AircraftAdapter, Mapping[str, Any]], None]] = {
+    "flight_data_push": AircraftAdapter._on_flight_data,
+    "status_push": AircraftAdapter._on_status,
+    "event_push": AircraftAdapter._on_event,
+    "lost_authority_push": AircraftAdapter._on_lost_authority,
+}
