@@ -134,6 +134,17 @@ class Adapter(abc.ABC):
     def osd_snapshot(self) -> Mapping[str, Any] | None:
         """The current periodic ``osd`` body, or None when nothing is known yet."""
 
+    # -- live control (DRC): called from the DRC streaming thread, so these must be thread-safe and
+    # must not wait for the event loop or for a device reply: they encode one frame and queue it.
+    def drive(self, forward: float, right: float, up: float, yaw_rate: float) -> bool:
+        """Send one live-control frame for this set-point (body frame, m/s and °/s clockwise).
+        Returns False when this device is not driven by live control."""
+        return False
+
+    def emergency_stop(self) -> None:
+        """Stop every motion at once (brake / stop / zero speed). Thread-safe, fire-and-forget."""
+        return None
+
     def state_snapshot(self) -> Mapping[str, Any] | None:
         """The current ``state`` body (published after every connect), or None."""
         return None

@@ -17,11 +17,15 @@ from typing import Any
 from adapters.base import Adapter
 from adapters.osdk.adapter import AircraftAdapter
 from adapters.osdk.extensions import EXTENSIONS as OSDK_EXTENSIONS
+from adapters.robomaster.adapter import RobotAdapter
+from adapters.robomaster.extensions import EVENT_EXTENSIONS as ROBOMASTER_EVENT_EXTENSIONS
+from adapters.robomaster.extensions import EXTENSIONS as ROBOMASTER_EXTENSIONS
 from adapters.rsdk.adapter import GimbalAdapter
 from adapters.rsdk.extensions import EXTENSIONS as RSDK_EXTENSIONS
 from gateway.clock import Clock, SystemClock
 from gateway.devices import DeviceTable
 from gateway.dispatcher import Dispatcher
+from gateway.drc import DrcController
 from gateway.metrics import Metrics
 from gateway.mqtt import MqttBridge
 from gateway.northbound import Northbound
@@ -41,13 +45,17 @@ def build_adapters(settings: GatewaySettings) -> list[Adapter]:
             adapters.append(GimbalAdapter(device))
         elif device.type == "osdk":
             adapters.append(AircraftAdapter(device))
+        elif device.type == "robomaster":
+            adapters.append(RobotAdapter(device))
         else:  # pragma: no cover - the settings union admits only known types
             raise ValueError(f"unknown device type {device.type!r}")
     return adapters
 
 
 #: Every device family's extension services: (method, request model, reply model, summary).
-EXTENSIONS = (*RSDK_EXTENSIONS, *OSDK_EXTENSIONS)
+EXTENSIONS = (*RSDK_EXTENSIONS, *OSDK_EXTENSIONS, *ROBOMASTER_EXTENSIONS)
+#: Every device family's extension events: (method, event data model, events_reply model, summary).
+EVENT_EXTENSIONS = (*ROBOMASTER_EVENT_EXTENSIONS,)
 
 
 def build_registry() -> Registry:
@@ -56,6 +64,8 @@ def build_registry() -> Registry:
     registry = default_registry()
     for method, data, reply, summary in EXTENSIONS:
         registry.register(TopicKind.SERVICES, method, data, reply, summary=summary)
+    for method, data, reply, summary in EVENT_EXTENSIONS:
+        registry.register(TopicKind.EVENTS, method, data, reply, summary=summary)
     return registry
 
 
@@ -78,6 +88,7 @@ class GatewayApp:
         self.bridge: MqttBridge | None = None
         self.dispatcher: Dispatcher | None = None
         self.northbound: Northbound | None = None
+        self.drc: DrcController | None = None
 
     async def run(self) -> None:
         loop = asyncio.get_running_loop()
@@ -93,6 +104,7 @@ class GatewayApp:
             loop=loop,
             metrics=self.metrics,
             on_connected=lambda: northbound_holder["nb"].on_connected(),
+            inline=lambda t, p: northbound_holder["drc"].inline_main(t, p),
         )
         self.northbound = Northbound(
             settings=s,
@@ -103,6 +115,19 @@ class GatewayApp:
             metrics=self.metrics,
         )
         northbound_holder["nb"] = self.northbound
+        nb = self.northbound
+        self.drc = DrcController(
+            settings=s,
+            registry=self.registry,
+            devices=self.devices,
+            metrics=self.metrics,
+            loop=loop,
+            main_bridge=self.bridge,
+            publish_event=lambda method, data, need_reply: nb.event(gw, method, data, need_reply),
+            publish_gateway_osd=nb.gateway_osd,
+        )
+        northbound_holder["drc"] = self.drc
+        nb.drc_state = lambda: self.drc.drc_state if self.drc is not None else 0
         offline = (topic(TopicKind.STATUS, gw), self.northbound.topology(offline=True))
         self.bridge.set_will(*offline)
         self.dispatcher = Dispatcher(
@@ -115,6 +140,7 @@ class GatewayApp:
             metrics=self.metrics,
             on_authority_change=self._authority_changed,
             on_events_reply=self.northbound.events_reply,
+            drc=self.drc,
         )
         for adapter in self.devices:
             await adapter.start(self.northbound)
@@ -149,6 +175,9 @@ class GatewayApp:
         self, periodic: asyncio.Task[None], consumer: asyncio.Task[None], offline: tuple[str, bytes]
     ) -> None:
         log.info("stopping: halting every motion first")
+        if self.drc is not None:
+            with contextlib.suppress(Exception):
+                await self.drc.exit()
         await asyncio.gather(*(a.stop_motion() for a in self.devices), return_exceptions=True)
         consumer.cancel()
         with contextlib.suppress(asyncio.CancelledError):

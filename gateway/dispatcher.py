@@ -54,7 +54,9 @@ log = logging.getLogger(__name__)
 __all__ = ["FLIGHT_METHODS", "Dispatcher", "Outbox"]
 
 #: Services that move the aircraft: they need flight authority when ``require_authority`` is on.
-FLIGHT_METHODS = frozenset({"takeoff_to_point", "fly_to_point", "fly_to_point_stop", "drc_mode_enter"})
+FLIGHT_METHODS = frozenset({"takeoff_to_point", "fly_to_point", "fly_to_point_stop"})
+#: Live flight control: answered by the DRC controller (which checks authority itself).
+_DRC_METHODS = frozenset({"drc_mode_enter", "drc_mode_exit"})
 #: No device may hold a reply longer than this: the reference cloud SDK resends after 3 s.
 MAX_DEADLINE = 2.8
 #: Services handled by the dispatcher itself rather than routed to one adapter's handler.
@@ -90,6 +92,7 @@ class Dispatcher:
         on_authority_change: Callable[[], None] | None = None,
         on_events_reply: Callable[[str, int], None] | None = None,
         drc_handler: Callable[[bytes], Awaitable[None]] | None = None,
+        drc: Any = None,
     ) -> None:
         self.gateway_sn = gateway_sn
         self.registry = registry
@@ -101,6 +104,7 @@ class Dispatcher:
         self.on_authority_change = on_authority_change
         self.on_events_reply = on_events_reply
         self.drc_handler = drc_handler
+        self.drc = drc  # gateway.drc.DrcController (enter/exit), None: live control unavailable
         self._replies: OrderedDict[str, _Cached] = OrderedDict()
         self._pending = 0
         self._tasks: set[asyncio.Task[None]] = set()
@@ -212,6 +216,8 @@ class Dispatcher:
         try:
             if method in _AUTHORITY_METHODS:
                 return await self._grab_authority(method, data)
+            if method in _DRC_METHODS and self.drc is not None:
+                return await (self.drc.enter(data) if method == "drc_mode_enter" else self.drc.exit())
             adapter, problem = self._route(method, data)
             if adapter is None:
                 return problem

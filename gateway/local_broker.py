@@ -7,6 +7,7 @@ API. Never binds anything but loopback, and never reuses a broker someone else s
 from __future__ import annotations
 
 import contextlib
+import getpass
 import os
 import shutil
 import signal
@@ -26,6 +27,15 @@ def find_mosquitto() -> str:
     )
     if not found:
         raise FileNotFoundError("mosquitto binary not found: install it (apt-get install mosquitto)")
+    return found
+
+
+def _mosquitto_passwd() -> str:
+    found = shutil.which("mosquitto_passwd") or (
+        "/usr/bin/mosquitto_passwd" if os.access("/usr/bin/mosquitto_passwd", os.X_OK) else None
+    )
+    if not found:
+        raise FileNotFoundError("mosquitto_passwd not found (it ships with the mosquitto package)")
     return found
 
 
@@ -55,18 +65,35 @@ class LocalBroker:
         listener_lines: str | None = None,
         allow_anonymous: bool = True,
         workdir: Path | None = None,
+        users: dict[str, str] | None = None,
     ) -> None:
         self.host = "127.0.0.1"
         self.port = port or free_port()
         self._dir = Path(workdir) if workdir else Path(tempfile.mkdtemp(prefix="djigw-mosq-"))
         self._dir.mkdir(parents=True, exist_ok=True)
         listener = listener_lines or f"listener {self.port} {self.host}"
+        if users:
+            password_file = self._dir / "passwords"
+            password_file.write_text("")
+            for user, password in users.items():
+                subprocess.run(
+                    [_mosquitto_passwd(), "-b", str(password_file), user, password],
+                    check=True,
+                    capture_output=True,
+                    timeout=30,
+                )
+            password_file.chmod(0o600)
+            extra_config = f"password_file {password_file}\n{extra_config}"
+            allow_anonymous = False
         self.config_path = self._dir / "mosquitto.conf"
         self.log_path = self._dir / "mosquitto.log"
         self.config_path.write_text(
             "\n".join(
                 [
                     "per_listener_settings false",
+                    # run as whoever started us: as root, mosquitto would switch to a 'mosquitto' user
+                    # that cannot read this private directory
+                    f"user {getpass.getuser()}",
                     listener,
                     f"allow_anonymous {'true' if allow_anonymous else 'false'}",
                     "persistence false",

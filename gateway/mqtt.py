@@ -76,6 +76,8 @@ class MqttBridge:
         will: tuple[str, bytes] | None = None,
         on_connected: Callable[[], None] | None = None,
         name: str = "main",
+        inline: Callable[[str, bytes], bool] | None = None,
+        on_disconnected: Callable[[str], None] | None = None,
     ) -> None:
         self.settings = settings
         self.client_id = client_id
@@ -84,6 +86,10 @@ class MqttBridge:
         self._loop = loop
         self._metrics = metrics
         self._on_connected = on_connected
+        # ``inline`` sees every message in the network thread first and may consume it (returns True):
+        # DRC heartbeats and sticks are answered there, so a busy event loop cannot delay them.
+        self._inline = inline
+        self._on_disconnected = on_disconnected
         self._name = name
         self._backoff = Backoff(settings.reconnect_min, settings.reconnect_max)
         self._connected = asyncio.Event()
@@ -91,6 +97,7 @@ class MqttBridge:
         self._sub_mid: int | None = None
         self._client = self._build_client(will)
         self._dropped_logged = 0
+        self.last_refusal: str | None = None  # the broker's reason for refusing the last CONNECT
 
     # -- set-up ---------------------------------------------------------------------------------
     def _build_client(self, will: tuple[str, bytes] | None) -> paho.Client:
@@ -186,6 +193,7 @@ class MqttBridge:
 
     def _on_connect(self, client: paho.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
         if reason.is_failure:
+            self.last_refusal = str(reason)
             self._metrics.inc("mqtt_connect_refused_total", link=self._name)
             log.error("broker %s refused the connection: %s", self._where(), reason)
             self._schedule_retry()
@@ -226,6 +234,11 @@ class MqttBridge:
         if reason.is_failure:
             self._metrics.inc("mqtt_disconnects_total", link=self._name)
             log.warning("lost broker %s: %s; reconnecting", self._where(), reason)
+            if self._on_disconnected is not None:
+                try:
+                    self._on_disconnected(str(reason))
+                except Exception:
+                    log.exception("disconnect hook failed")
         self._schedule_retry()
 
     def _on_connect_fail(self, client: paho.Client, userdata: Any) -> None:
@@ -237,6 +250,15 @@ class MqttBridge:
         self._client.reconnect_delay_set(delay, delay)
 
     def _on_message(self, client: paho.Client, userdata: Any, msg: paho.MQTTMessage) -> None:
+        if self._inline is not None:
+            try:
+                if self._inline(msg.topic, msg.payload):
+                    self._metrics.inc("mqtt_messages_in_total", link=self._name)
+                    return
+            except Exception:  # never let a handler kill paho's thread
+                self._metrics.inc("handler_exceptions_total", where=f"inline:{self._name}")
+                log.exception("inline handler failed on %s", msg.topic[:200])
+                return
         payload = msg.payload
         oversize = len(payload) > self.settings.max_payload
         if oversize:

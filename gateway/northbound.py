@@ -14,7 +14,7 @@ import contextlib
 import logging
 import secrets
 import uuid
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -71,6 +71,8 @@ class Northbound:
         self.metrics = metrics
         self._events: dict[str, _PendingEvent] = {}
         self._next_osd: dict[str, float] = {}
+        self.drc_state: Callable[[], int] = lambda: 0  # set by the app when live control exists
+        self._next_gateway_osd = 0.0
         self._osd_period = {d.sn: (d.osd_period or settings.osd_period) for d in settings.devices}
 
     # -- envelopes --------------------------------------------------------------------------------
@@ -129,6 +131,17 @@ class Northbound:
             self._events[ids["tid"]] = _PendingEvent(
                 name, raw, self.settings.dispatcher.event_retries, self.clock.monotonic() + interval
             )
+
+    def gateway_osd(self, data: Mapping[str, Any]) -> None:
+        """The gateway's own osd (``drc_state``), under the gateway's serial number."""
+        cls = self.registry.telemetry_class(TopicKind.OSD, Profile.GATEWAY)
+        try:
+            msg = cls.model_validate({**self._ids(), "gateway": self.gateway_sn, "data": dict(data)})
+        except ValidationError as exc:
+            self.metrics.inc("outbound_invalid_total", kind="osd")
+            log.error("dropped an invalid gateway osd: %s", exc.errors()[:2])
+            return
+        self.outbox.publish(topic(TopicKind.OSD, self.gateway_sn), msg.model_dump_json().encode(), qos=0)
 
     def online_changed(self, sn: str, online: bool) -> None:
         self.metrics.set("device_online", 1 if online else 0, device=sn)
@@ -235,6 +248,9 @@ class Northbound:
 
     def publish_due_osd(self) -> None:
         now = self.clock.monotonic()
+        if now >= self._next_gateway_osd:
+            self._next_gateway_osd = now + self.settings.osd_period
+            self.gateway_osd({"drc_state": self.drc_state()})
         for adapter in self.devices:
             sn = adapter.info.sn
             if not adapter.online or now < self._next_osd.get(sn, 0.0):

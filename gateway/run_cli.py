@@ -25,6 +25,10 @@ log = logging.getLogger(__name__)
 SIM_GATEWAY_SN = "DJIGW-SIM-0001"
 SIM_GIMBAL_SN = "RSDK-SIM-0001"
 SIM_GIMBAL_PAYLOAD_INDEX = "1001-0-0"
+SIM_ROBOT_SN = "RM-SIM-0001"
+SIM_ROBOT_PAYLOAD_INDEX = "1002-0-0"  # the simulated robot's gimbal (camera_screen_drag, gimbal_reset)
+#: Placeholder url of the simulated robot; ``_run`` replaces it with its in-process simulator's socket:// url.
+SIM_ROBOT_URL = "sim://robomaster"
 
 
 class _JsonFormatter(logging.Formatter):
@@ -65,6 +69,14 @@ def simulated_settings(base: dict[str, Any]) -> dict[str, Any]:
             "channel": f"djigw-sim-{SIM_GIMBAL_SN}",
         }
     )
+    devices.append(
+        {
+            "type": "robomaster",
+            "sn": SIM_ROBOT_SN,
+            "payload_index": SIM_ROBOT_PAYLOAD_INDEX,
+            "url": SIM_ROBOT_URL,
+        }
+    )
     doc["devices"] = devices
     return doc
 
@@ -80,7 +92,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     run.set_defaults(handler=cmd_run)
 
     sim = sub.add_parser("simulate", help="run one device simulator as its own process")
-    sim.add_argument("device", choices=("rsdk",))
+    sim.add_argument("device", choices=("rsdk", "robomaster"))
     sim.add_argument("args", nargs=argparse.REMAINDER, help="simulator options (see: simulate rsdk --help)")
     sim.set_defaults(handler=cmd_simulate)
 
@@ -133,6 +145,7 @@ async def _run(settings: GatewaySettings, *, simulate: bool) -> int:
                 log.info(
                     "simulated gimbal %s (payload %s) on virtual CAN %s", d.sn, d.payload_index, d.channel
                 )
+        settings = _simulate_robots(settings, sims)
     app = GatewayApp(settings)
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -146,12 +159,36 @@ async def _run(settings: GatewaySettings, *, simulate: bool) -> int:
     return 0
 
 
+def _simulate_robots(settings: GatewaySettings, sims: list[Any]) -> GatewaySettings:
+    """Start a referee + main board simulator on a loopback TCP port for every robot whose url is
+    ``SIM_ROBOT_URL``, and point the robot's url at it."""
+    import time
+
+    from adapters.robomaster.sim import RefereeMatch, RobomasterSim
+    from adapters.simio import TcpEndpoint
+
+    devices = []
+    for d in settings.devices:
+        if d.type == "robomaster" and d.url == SIM_ROBOT_URL:
+            match = RefereeMatch(season=d.season, unix_offset=time.time() - time.monotonic())
+            endpoint = TcpEndpoint(RobomasterSim(match, control=d.control.channel())).start()
+            sims.append(endpoint)
+            d = d.model_copy(update={"url": endpoint.url})
+            log.info("simulated robot %s (season %s) at %s", d.sn, d.season, endpoint.url)
+        devices.append(d)
+    return settings.model_copy(update={"devices": devices})
+
+
 def cmd_simulate(ns: argparse.Namespace) -> int:
     setup_logging("INFO", False)
     if ns.device == "rsdk":
         from adapters.rsdk import sim
 
         return sim.main(ns.args)
+    if ns.device == "robomaster":
+        from adapters.robomaster import sim as robomaster_sim
+
+        return robomaster_sim.main(ns.args)
     return 2  # pragma: no cover - argparse restricts the choices
 
 

@@ -25,12 +25,14 @@ from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, Settings
 
 from adapters.config import ProductSettings
 from adapters.osdk.config import OsdkDeviceSettings
+from adapters.robomaster.config import RobomasterDeviceSettings
 from adapters.rsdk.config import RsdkDeviceSettings
 
 __all__ = [
     "BrokerSettings",
     "ConfigError",
     "DispatcherSettings",
+    "DrcSettings",
     "GatewaySettings",
     "ProductSettings",
     "RsdkDeviceSettings",
@@ -116,7 +118,23 @@ class DispatcherSettings(BaseModel):
     max_pending: int = Field(256, ge=1, description="requests in flight at once; more get 314000 busy")
 
 
-DeviceSettings = Annotated[RsdkDeviceSettings | OsdkDeviceSettings, Field(discriminator="type")]
+class DrcSettings(BaseModel):
+    """Live flight control (DRC): the failsafe timings and the stick conventions."""
+
+    model_config = _STRICT
+    stick_timeout: float = Field(0.5, gt=0, le=5, description="no drone_control this long → zero set-point")
+    heartbeat_timeout: float = Field(3.0, gt=0, le=30, description="no heart_beat this long → stop, 514301")
+    idle_timeout: float = Field(60.0, gt=0, le=3600, description="no heart_beat this long → leave DRC")
+    stream_hz: float = Field(25.0, ge=20, le=50, description="set-point stream to the devices")
+    enter_timeout: float = Field(2.0, gt=0, le=2.5, description="wait for the DRC broker (s)")
+    x_sign: Literal[1, -1] = Field(1, description="seed: +x is left; -1 when your cloud sends +x right")
+    y_sign: Literal[1, -1] = Field(1, description="seed: +y is forward; -1 when your cloud sends +y back")
+    swap_xy: bool = Field(False, description="true when your cloud sends x forward and y sideways")
+
+
+DeviceSettings = Annotated[
+    RsdkDeviceSettings | OsdkDeviceSettings | RobomasterDeviceSettings, Field(discriminator="type")
+]
 
 
 class GatewaySettings(BaseSettings):
@@ -128,6 +146,7 @@ class GatewaySettings(BaseSettings):
     product: ProductSettings = ProductSettings()
     broker: BrokerSettings = BrokerSettings()
     dispatcher: DispatcherSettings = DispatcherSettings()
+    drc: DrcSettings = DrcSettings()
     devices: list[DeviceSettings] = Field(default_factory=list)
     osd_period: float = Field(2.0, gt=0, description="periodic osd (0.5 Hz by default, per device override)")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
@@ -138,7 +157,7 @@ class GatewaySettings(BaseSettings):
         sns = [d.sn for d in self.devices]
         if len(set(sns)) != len(sns):
             raise ValueError("device serial numbers must be unique")
-        idx = [d.payload_index for d in self.devices]
+        idx = [i for i in (getattr(d, "payload_index", None) for d in self.devices) if i is not None]
         if len(set(idx)) != len(idx):
             raise ValueError("payload_index values must be unique")
         return self

@@ -8,13 +8,18 @@ import queue
 import threading
 import time
 import uuid
+from collections import Counter
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import can
 import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion
 
 from adapters.base import Adapter
+from adapters.rsdk.can import HOST_TX_ID, Reassembler
+from adapters.rsdk.commands import decode_message
+from adapters.rsdk.protocol import Frame
 from gateway.app import GatewayApp
 from gateway.settings import GatewaySettings, load_settings
 
@@ -209,3 +214,47 @@ def gateway_settings(broker_port: int, devices: list[dict[str, Any]], **extra: A
             {**doc[key], **value} if isinstance(value, dict) and isinstance(doc.get(key), dict) else value
         )
     return load_settings(None, **doc)
+
+
+class BusSniffer:
+    """Listens on the same virtual CAN channel and decodes what the gateway sends to the gimbal."""
+
+    def __init__(self, channel: str) -> None:
+        self.bus = can.Bus(interface="virtual", channel=channel)
+        self.rx = Reassembler(rx_id=HOST_TX_ID)
+        self.commands: list[tuple[str, dict[str, Any]]] = []
+        self.times: list[float] = []  # time.monotonic() when each command was heard
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            msg = self.bus.recv(0.02)
+            if msg is None:
+                continue
+            for item in self.rx.feed(msg.arbitration_id, bytes(msg.data)):
+                if isinstance(item, Frame) and not item.is_reply:
+                    m = decode_message(item)
+                    self.times.append(time.monotonic())
+                    self.commands.append((m.name, m.fields))
+
+    def names(self) -> Counter[str]:
+        return Counter(name for name, _ in list(self.commands))
+
+    def last(self, name: str, predicate: Any = None, timeout: float = 5.0) -> dict[str, Any]:
+        """The latest ``name`` command seen on the bus (waiting until one matches ``predicate``): the
+        sniffer hears the bus independently of the gimbal, so it may lag the reply by a moment."""
+
+        def find() -> dict[str, Any] | None:
+            for n, f in reversed(list(self.commands)):
+                if n == name:
+                    return f if predicate is None or predicate(f) else None
+            return None
+
+        return wait_until(find, timeout, what=f"{name} on the bus")
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2)
+        self.bus.shutdown()

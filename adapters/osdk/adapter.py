@@ -95,6 +95,8 @@ class Telemetry:
     battery_percent: int | None = None
     battery_voltage: int | None = None
     battery_current: int | None = None
+    #: obstacle distances (m) and sensor health by direction, new firmware only (position item)
+    obstacles: dict[str, tuple[float, bool]] | None = None
 
     @property
     def home_altitude(self) -> float | None:
@@ -230,6 +232,20 @@ class AircraftAdapter(Adapter):
     def emergency_brake(self) -> None:
         with contextlib.suppress(LinkError):
             self._fire("emergency_brake", {})
+
+    def drive(self, forward: float, right: float, up: float, yaw_rate: float) -> bool:
+        """Live control: one movement-control frame. Thread-safe: it only encodes and queues (session 0
+        takes no ACK; two threads drawing the global seq at once can at worst repeat a seq on session 0,
+        which the FC does not check)."""
+        if not self.has_control or self._link is None or not self._link.up:
+            return False
+        self.send_movement(forward, right, up, yaw_rate)
+        return True
+
+    def emergency_stop(self) -> None:
+        """Brake now (the 26-byte emergency brake, firmware >= 3.2.36.6) and zero velocity after it."""
+        self.emergency_brake()
+        self.send_movement(0.0, 0.0, 0.0, 0.0)
 
     # -- link supervision -------------------------------------------------------------------------
     async def _supervise(self) -> None:
@@ -419,6 +435,11 @@ class AircraftAdapter(Adapter):
         if pos is not None:
             t.latitude, t.longitude = math.degrees(pos["latitude"]), math.degrees(pos["longitude"])
             t.altitude, t.height = float(pos["altitude"]), float(pos["height"])
+            if "obstacle_front" in pos:
+                t.obstacles = {
+                    side: (float(pos[f"obstacle_{side}"]), bool(pos.get(f"{side}_health", 0)))
+                    for side in ("front", "right", "back", "left", "up", "down")
+                }
         vel = f.get("velocity")
         if vel is not None:
             t.velocity = (float(vel["x"]), float(vel["y"]), float(vel["z"]))

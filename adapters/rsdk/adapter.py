@@ -184,6 +184,26 @@ class GimbalAdapter(Adapter):
                     "speed_control", {"yaw_speed": 0, "roll_speed": 0, "pitch_speed": 0, "ctrl_byte": ctrl}
                 )
 
+    def drive(self, forward: float, right: float, up: float, yaw_rate: float) -> bool:
+        """Live control of the gimbal (when ``drc_drive``): yaw rate → yaw speed, vertical stick → pitch
+        speed. Thread-safe: encodes one speed-control frame and queues it (cmd type 0, no reply)."""
+        s = self.settings
+        if not s.drc_drive or not self._online:
+            return False
+        limit = s.max_speed_dps
+        yaw = max(-limit, min(limit, yaw_rate))
+        pitch = max(-limit, min(limit, up * s.drc_pitch_gain))
+        with contextlib.suppress(LinkError, CommandError):
+            self._send_no_reply("speed_control", self._speed_fields(yaw, pitch))
+        return True
+
+    def emergency_stop(self) -> None:
+        for ctrl in (SPEED_TAKE_OVER, SPEED_RELEASE):
+            with contextlib.suppress(LinkError, CommandError):
+                self._send_no_reply(
+                    "speed_control", {"yaw_speed": 0, "roll_speed": 0, "pitch_speed": 0, "ctrl_byte": ctrl}
+                )
+
     # -- link supervision -------------------------------------------------------------------------
     async def _supervise(self) -> None:
         """Keep the link open, the push enabled, and the online flag honest."""

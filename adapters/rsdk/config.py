@@ -39,3 +39,7 @@ class RsdkDeviceSettings(BaseModel):
     drag_hold: float = Field(0.5, gt=0, le=5, description="a drag lasts this long after its last message")
     drag_rate_hz: float = Field(10.0, ge=10, le=50, description="speed control refresh while a drag lasts")
     max_speed_dps: float = Field(360.0, gt=0, le=360, description="fastest drag accepted (°/s)")
+    drc_drive: bool = Field(
+        False, description="live control (DRC) sticks drive this gimbal: w → yaw, h → pitch"
+    )
+    drc_pitch_gain: float = Field(10.0, gt=0, le=72, description="DRC: gimbal pitch °/s per m/s of h")

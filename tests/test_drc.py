@@ -1,0 +1,287 @@
+"""Live flight control (DRC) through two real mosquittos: the cloud's broker and a DRC broker with
+username/password, as ``drc_mode_enter`` names it. Devices under live control here: the simulated R SDK
+gimbal (``drc_drive``); the aircraft's DRC tests are in test_drc_aircraft.py."""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from typing import Any
+
+import paho.mqtt.client as paho
+import pytest
+from paho.mqtt.enums import CallbackAPIVersion
+
+from adapters.rsdk.sim import GimbalCanSim
+from gateway.local_broker import LocalBroker
+from tests.support import BusSniffer, CloudClient, GatewayThread, gateway_settings, wait_until
+
+pytestmark = pytest.mark.broker
+
+GW = "GW-TEST-1"
+PI = "1001-0-0"
+DRC_USER, DRC_PASSWORD = "drc-operator", "s3cret-drc-token-9f2c"
+
+
+class DrcClient:
+    """The cloud side of the DRC link: publishes drc/down, collects drc/up."""
+
+    def __init__(self, port: int, username: str, password: str) -> None:
+        self.up: list[dict[str, Any]] = []
+        self._cond = threading.Condition()
+        self.client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"drc-cloud-{uuid.uuid4().hex[:6]}")
+        self.client.username_pw_set(username, password)
+        self.client.on_message = self._on_message
+        ready = threading.Event()
+        self.client.on_subscribe = lambda *a: ready.set()
+        self.client.connect("127.0.0.1", port)
+        self.client.loop_start()
+        self.client.subscribe(f"thing/product/{GW}/drc/up", qos=0)
+        assert ready.wait(5)
+
+    def _on_message(self, client: Any, userdata: Any, msg: paho.MQTTMessage) -> None:
+        with self._cond:
+            self.up.append(json.loads(msg.payload))
+            self._cond.notify_all()
+
+    def send(self, method: str, data: dict[str, Any], **beside: Any) -> None:
+        body = json.dumps({"method": method, "data": data, **beside})
+        self.client.publish(f"thing/product/{GW}/drc/down", body, qos=0)
+
+    def wait(self, method: str, predicate: Any = lambda d: True, timeout: float = 5.0) -> dict[str, Any]:
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for msg in self.up:
+                    if msg.get("method") == method and predicate(msg["data"]):
+                        return msg
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise AssertionError(f"no {method} on drc/up within {timeout}s")
+                self._cond.wait(left)
+
+    def count(self, method: str, predicate: Any = lambda d: True) -> int:
+        with self._cond:
+            return sum(1 for m in self.up if m.get("method") == method and predicate(m["data"]))
+
+    def close(self) -> None:
+        self.client.disconnect()
+        self.client.loop_stop()
+
+
+@pytest.fixture
+def drc_broker() -> Iterator[LocalBroker]:
+    b = LocalBroker(users={DRC_USER: DRC_PASSWORD}).start()
+    try:
+        yield b
+    finally:
+        b.stop()
+
+
+@pytest.fixture
+def rig(broker: LocalBroker, drc_broker: LocalBroker, can_channel: str) -> Iterator[dict[str, Any]]:
+    sim = GimbalCanSim(interface="virtual", channel=can_channel).start()
+    sniffer = BusSniffer(can_channel)
+    device = {
+        "type": "rsdk",
+        "sn": "RSDK-DRC-1",
+        "interface": "virtual",
+        "channel": can_channel,
+        "drc_drive": True,
+    }
+    settings = gateway_settings(broker.port, [device], drc={"heartbeat_timeout": 1.0, "idle_timeout": 30.0})
+    cloud = CloudClient(broker.host, broker.port, GW)
+    gw = GatewayThread(settings).start()
+    try:
+        cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1)
+        assert cloud.service("payload_authority_grab", {"payload_index": PI})["data"]["result"] == 0
+        yield {"sim": sim, "sniffer": sniffer, "cloud": cloud, "gw": gw, "drc_broker": drc_broker}
+    finally:
+        gw.stop()
+        cloud.close()
+        sniffer.close()
+        sim.stop()
+
+
+def _enter(cloud: CloudClient, drc_broker: LocalBroker, **over: Any) -> dict[str, Any]:
+    broker = {
+        "address": f"127.0.0.1:{drc_broker.port}",
+        "client_id": f"drc-gw-{uuid.uuid4().hex[:6]}",
+        "username": DRC_USER,
+        "password": DRC_PASSWORD,
+        "expire_time": int(time.time()) + 3600,
+        "enable_tls": False,
+        **over,
+    }
+    return cloud.service("drc_mode_enter", {"mqtt_broker": broker, "osd_frequency": 10, "hsi_frequency": 1})
+
+
+def test_enter_sticks_heartbeats_seq_rules_and_exit(
+    rig: dict[str, Any], caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.DEBUG)
+    cloud, model, sniffer = rig["cloud"], rig["sim"].model, rig["sniffer"]
+    reply = _enter(cloud, rig["drc_broker"])
+    assert reply["data"]["result"] == 0, reply
+    states = [
+        e["data"]["drc_state"]
+        for e in cloud.wait_for("events", lambda b: b["method"] == "drc_status_notify", count=2)
+    ]
+    assert states[:2] == [1, 2]
+    cloud.wait_for(f"{GW}/osd", lambda b: b["data"].get("drc_state") == 2)
+
+    drc = DrcClient(rig["drc_broker"].port, DRC_USER, DRC_PASSWORD)
+    try:
+        # heartbeat: echoed at once with the same seq and timestamp, whether ts or timestamp, inside or beside
+        drc.send("heart_beat", {"seq": 1, "timestamp": 1670415891013})
+        assert drc.wait("heart_beat")["data"] == {"seq": 1, "timestamp": 1670415891013}
+        drc.send("heart_beat", {"ts": 1670415891999}, seq=2)
+        assert drc.wait("heart_beat", lambda d: d.get("seq") == 2)["data"]["timestamp"] == 1670415891999
+
+        # sticks: w (yaw rate) drives the gimbal's yaw speed; replies carry the seq
+        drc.send("drone_control", {"seq": 1, "w": 30.0})
+        assert drc.wait("drone_control", lambda d: d["output"]["seq"] == 1)["data"]["result"] == 0
+        wait_until(lambda: model.yaw.speed == 30.0, 3, what="gimbal yaw speed 30")
+        for seq in (5, 5, 5):  # clouds repeat each DRC message: the repeats are ignored
+            drc.send("drone_control", {"seq": seq, "w": 40.0})
+        drc.send("drone_control", {"seq": 3, "w": -90.0})  # older than 5: refused with 319033
+        stale = drc.wait("drone_control", lambda d: d["result"] == 319033)
+        assert stale["data"]["output"]["seq"] == 3
+        assert drc.count("drone_control", lambda d: d["output"].get("seq") == 5) == 1
+        wait_until(lambda: model.yaw.speed == 40.0, 3, what="seq 5 applied")
+        drc.send("drone_control", {"seq": 0, "w": -20.0})  # seq 0 restarts the sequence
+        wait_until(lambda: model.yaw.speed == -20.0, 3, what="restarted sequence accepted")
+
+        # sticks stop: the set-point is zeroed within stick_timeout (0.5 s) plus a stream period
+        last_stick = time.monotonic()
+        wait_until(lambda: model.yaw.speed == 0.0, 3, what="zero speed after sticks stop")
+        first_zero = next(
+            t for t, (n, f) in zip(sniffer.times, sniffer.commands, strict=False)
+            if t > last_stick and n == "speed_control" and f["yaw_speed"] == 0
+        )  # fmt: skip
+        assert first_zero - last_stick < 0.5 + 0.04 + 0.35  # deadline + one period + scheduling margin
+
+        # exit: motion already stopped, drc_state back to 0
+        drc.send("heart_beat", {"seq": 3, "timestamp": 5})
+        assert cloud.service("drc_mode_exit", {})["data"]["result"] == 0
+        cloud.wait_for("events", lambda b: b["method"] == "drc_status_notify" and b["data"]["drc_state"] == 0)
+    finally:
+        drc.close()
+    # the DRC password never reaches a log line
+    assert DRC_PASSWORD not in caplog.text
+    assert rig["gw"].app.metrics.count("drc_heartbeats_total") >= 2
+
+
+def test_heartbeat_loss_stops_motion_and_emergency_stop_holds(rig: dict[str, Any]) -> None:
+    cloud, model = rig["cloud"], rig["sim"].model
+    assert _enter(cloud, rig["drc_broker"])["data"]["result"] == 0
+    drc = DrcClient(rig["drc_broker"].port, DRC_USER, DRC_PASSWORD)
+    try:
+        stop = threading.Event()
+
+        def sticks() -> None:  # a steady 20 Hz stick stream, but no heartbeats
+            seq = 1
+            while not stop.is_set():
+                drc.send("drone_control", {"seq": seq, "w": 25.0})
+                seq += 1
+                time.sleep(0.05)
+
+        t = threading.Thread(target=sticks, daemon=True)
+        t.start()
+        wait_until(lambda: model.yaw.speed == 25.0, 3, what="moving")
+        # heartbeats are 1 s overdue (heartbeat_timeout in this rig): stop, and 514301 to the cloud
+        cloud.wait_for(
+            "events", lambda b: b["method"] == "drc_status_notify" and b["data"]["result"] == 514301
+        )
+        wait_until(lambda: model.yaw.speed == 0.0, 3, what="stopped without heartbeats")
+        stop.set()
+        t.join(2)
+        # a heartbeat brings the sticks back
+        drc.send("heart_beat", {"seq": 1, "timestamp": 1})
+        drc.send("drone_control", {"seq": 1000, "w": 10.0})
+        wait_until(lambda: model.yaw.speed == 10.0, 3, what="moving again after a heartbeat")
+
+        # emergency stop: zero at once, and sticks are refused until the sequence restarts at 0
+        drc.send("drone_emergency_stop", {})
+        assert drc.wait("drone_emergency_stop")["data"]["result"] == 0
+        wait_until(lambda: model.yaw.speed == 0.0, 3, what="emergency stop")
+        drc.send("heart_beat", {"seq": 2, "timestamp": 2})
+        drc.send("drone_control", {"seq": 1001, "w": 10.0})
+        held = drc.wait("drone_control", lambda d: d["output"]["seq"] == 1001)
+        assert held["data"]["result"] == 314000
+        time.sleep(0.2)
+        assert model.yaw.speed == 0.0
+        drc.send("drone_control", {"seq": 0, "w": 12.0})
+        wait_until(lambda: model.yaw.speed == 12.0, 3, what="released by seq 0")
+    finally:
+        drc.close()
+
+
+def test_drc_broker_killed_stops_motion_and_ends_the_session(rig: dict[str, Any]) -> None:
+    cloud, model, drc_broker = rig["cloud"], rig["sim"].model, rig["drc_broker"]
+    assert _enter(cloud, drc_broker)["data"]["result"] == 0
+    drc = DrcClient(drc_broker.port, DRC_USER, DRC_PASSWORD)
+    drc.send("heart_beat", {"seq": 1, "timestamp": 1})
+    drc.send("drone_control", {"seq": 1, "w": 15.0})
+    wait_until(lambda: model.yaw.speed == 15.0, 3, what="moving")
+    drc.client.loop_stop()
+    drc_broker.stop(kill=True)
+    wait_until(lambda: model.yaw.speed == 0.0, 3, what="stopped when the DRC broker vanished")
+    cloud.wait_for(
+        "events",
+        lambda b: b["method"] == "drc_status_notify" and b["data"] == {"result": 514303, "drc_state": 0},
+    )
+
+
+def test_enter_refusals(rig: dict[str, Any]) -> None:
+    cloud, drc_broker = rig["cloud"], rig["drc_broker"]
+    expired = _enter(cloud, drc_broker, expire_time=int(time.time()) - 10)
+    assert expired["data"]["result"] == 325001 and "expired" in expired["data"]["output"]["reason"]
+    wrong = _enter(cloud, drc_broker, password="not-the-password")
+    assert wrong["data"]["result"] == 514304
+    # nothing the gateway published (replies, events, telemetry) repeats a credential
+    published = [raw for t, _, raw in cloud.messages if not t.endswith("/services")]
+    assert published and not any(
+        b"not-the-password" in raw or DRC_PASSWORD.encode() in raw for raw in published
+    )
+    # sticks on the main broker without a session are ignored (no reply, no motion)
+    cloud.publish(f"thing/product/{GW}/drc/down", {"method": "drone_control", "data": {"seq": 1, "w": 50.0}})
+    time.sleep(0.2)
+    assert rig["sim"].model.yaw.speed == 0.0
+
+
+def test_drc_on_the_main_broker_reuses_its_connection(broker: LocalBroker, can_channel: str) -> None:
+    sim = GimbalCanSim(interface="virtual", channel=can_channel).start()
+    device = {
+        "type": "rsdk",
+        "sn": "RSDK-DRC-2",
+        "interface": "virtual",
+        "channel": can_channel,
+        "drc_drive": True,
+    }
+    cloud = CloudClient(broker.host, broker.port, GW)
+    with GatewayThread(gateway_settings(broker.port, [device])) as gw:
+        cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1)
+        cloud.service("payload_authority_grab", {"payload_index": PI})
+        same = {"address": f"127.0.0.1:{broker.port}", "client_id": "x", "username": "", "password": "",
+                "expire_time": 0, "enable_tls": False}  # fmt: skip
+        r = cloud.service("drc_mode_enter", {"mqtt_broker": same, "osd_frequency": 5, "hsi_frequency": 1})
+        assert r["data"]["result"] == 0
+        assert gw.app.drc._bridge is None  # the main connection carries drc/down and drc/up
+        cloud.publish(
+            f"thing/product/{GW}/drc/down",
+            {"method": "heart_beat", "data": {"seq": 7, "timestamp": 9}},
+            qos=0,
+        )
+        echo = cloud.wait_for("drc/up", lambda b: b["method"] == "heart_beat")[0]
+        assert echo["data"] == {"seq": 7, "timestamp": 9}
+        cloud.publish(
+            f"thing/product/{GW}/drc/down", {"method": "drone_control", "data": {"seq": 1, "w": 5.0}}, qos=0
+        )
+        wait_until(lambda: sim.model.yaw.speed == 5.0, 3, what="driven over the main connection")
+    cloud.close()
+    sim.stop()
