@@ -110,6 +110,7 @@ def _lazy(module: str, func: str = "run") -> Suite:
 SUITES: list[tuple[str, Suite]] = [
     ("codecs", _lazy("bench.codecs")),
     ("e2e", _lazy("bench.e2e")),
+    ("drc", _lazy("bench.drc")),
 ]
 
 

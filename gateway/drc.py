@@ -275,6 +275,13 @@ class DrcController:
                 self._notify_from_thread(0)
         elif method == "drone_control":
             result, output = self._stick(request.data)
+            if result == ResultCode.SUCCESS:
+                # on the wire now, not at the next stream tick: stick-to-wire latency is one frame
+                with self._lock:
+                    setpoint = self.setpoint
+                for adapter in self._targets():
+                    with contextlib.suppress(Exception):
+                        adapter.drive(*setpoint)
             if result is not None:
                 self._publish_up(reply_for(request, int(result), output))
         elif method == "drone_emergency_stop":
