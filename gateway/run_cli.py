@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import json
 import logging
 import signal
 import sys
@@ -29,27 +28,17 @@ SIM_ROBOT_SN = "RM-SIM-0001"
 SIM_ROBOT_PAYLOAD_INDEX = "1002-0-0"  # the simulated robot's gimbal (camera_screen_drag, gimbal_reset)
 #: Placeholder url of the simulated robot; ``_run`` replaces it with its in-process simulator's socket:// url.
 SIM_ROBOT_URL = "sim://robomaster"
-
-
-class _JsonFormatter(logging.Formatter):
-    def format(self, record: logging.LogRecord) -> str:
-        out: dict[str, Any] = {
-            "ts": round(record.created, 3),
-            "level": record.levelname,
-            "logger": record.name,
-            "msg": record.getMessage(),
-        }
-        if record.exc_info:
-            out["exc"] = self.formatException(record.exc_info)
-        return json.dumps(out)
+SIM_AIRCRAFT_SN = "OSDK-SIM-0001"
+#: Placeholder url of the simulated aircraft; ``_run`` replaces it with its simulator's socket:// url.
+SIM_AIRCRAFT_URL = "sim://osdk"
 
 
 def setup_logging(level: str, as_json: bool) -> None:
-    handler = logging.StreamHandler(sys.stderr)
-    if as_json:
-        handler.setFormatter(_JsonFormatter())
-    else:
-        handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)-7s %(name)s: %(message)s"))
+    """Text (default) or JSON lines on stderr, with the request context and secrets masked
+    (``gateway.logcontext``)."""
+    from gateway.logcontext import install
+
+    handler = install(logging.StreamHandler(sys.stderr), as_json)
     root = logging.getLogger()
     root.handlers[:] = [handler]
     root.setLevel(level)
@@ -77,6 +66,7 @@ def simulated_settings(base: dict[str, Any]) -> dict[str, Any]:
             "url": SIM_ROBOT_URL,
         }
     )
+    devices.append({"type": "osdk", "sn": SIM_AIRCRAFT_SN, "url": SIM_AIRCRAFT_URL})
     doc["devices"] = devices
     return doc
 
@@ -89,10 +79,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     run.add_argument("--gateway-sn", help="gateway serial number, overrides the config")
     run.add_argument("--log-json", action="store_true", help="one JSON object per log line")
     run.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    run.add_argument(
+        "--metrics-port", type=int, help="/metrics, /healthz, /status port (default 9108; 0: any)"
+    )
+    run.add_argument("--metrics-host", help="their listen address (default 127.0.0.1)")
+    run.add_argument("--no-metrics", action="store_true", help="no HTTP endpoint at all")
     run.set_defaults(handler=cmd_run)
 
     sim = sub.add_parser("simulate", help="run one device simulator as its own process")
-    sim.add_argument("device", choices=("rsdk", "robomaster"))
+    sim.add_argument("device", choices=("rsdk", "robomaster", "osdk"))
     sim.add_argument("args", nargs=argparse.REMAINDER, help="simulator options (see: simulate rsdk --help)")
     sim.set_defaults(handler=cmd_simulate)
 
@@ -107,6 +102,15 @@ def _settings_from(ns: argparse.Namespace) -> GatewaySettings:
         overrides["log_json"] = True
     if ns.log_level:
         overrides["log_level"] = ns.log_level
+    metrics = {
+        key: value
+        for key, value in (("port", ns.metrics_port), ("host", ns.metrics_host))
+        if value is not None
+    }
+    if ns.no_metrics:
+        metrics["enabled"] = False
+    if metrics:
+        overrides["metrics"] = metrics
     if not ns.simulate:
         return load_settings(ns.config, **overrides)
     import tomllib
@@ -146,6 +150,7 @@ async def _run(settings: GatewaySettings, *, simulate: bool) -> int:
                     "simulated gimbal %s (payload %s) on virtual CAN %s", d.sn, d.payload_index, d.channel
                 )
         settings = _simulate_robots(settings, sims)
+        settings = _simulate_aircraft(settings, sims)
     app = GatewayApp(settings)
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -179,12 +184,33 @@ def _simulate_robots(settings: GatewaySettings, sims: list[Any]) -> GatewaySetti
     return settings.model_copy(update={"devices": devices})
 
 
+def _simulate_aircraft(settings: GatewaySettings, sims: list[Any]) -> GatewaySettings:
+    """Start an Onboard SDK flight-controller simulator on a loopback TCP port for every aircraft
+    whose url is ``SIM_AIRCRAFT_URL``, and point the aircraft's url at it."""
+    from adapters.osdk.sim import OsdkFcDevice
+    from adapters.simio import TcpEndpoint
+
+    devices = []
+    for d in settings.devices:
+        if d.type == "osdk" and d.url == SIM_AIRCRAFT_URL:
+            endpoint = TcpEndpoint(OsdkFcDevice()).start()
+            sims.append(endpoint)
+            d = d.model_copy(update={"url": endpoint.url})
+            log.info("simulated aircraft %s at %s", d.sn, endpoint.url)
+        devices.append(d)
+    return settings.model_copy(update={"devices": devices})
+
+
 def cmd_simulate(ns: argparse.Namespace) -> int:
     setup_logging("INFO", False)
     if ns.device == "rsdk":
         from adapters.rsdk import sim
 
         return sim.main(ns.args)
+    if ns.device == "osdk":
+        from adapters.osdk import sim as osdk_sim
+
+        return osdk_sim.main(ns.args)
     if ns.device == "robomaster":
         from adapters.robomaster import sim as robomaster_sim
 

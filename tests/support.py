@@ -41,8 +41,17 @@ def wait_until(
 class CloudClient:
     """What a cloud platform does: publish services, read replies, osd, state, events and topology."""
 
-    def __init__(self, url_host: str, port: int, gateway_sn: str, *, client_id: str | None = None) -> None:
+    def __init__(
+        self,
+        url_host: str,
+        port: int,
+        gateway_sn: str,
+        *,
+        client_id: str | None = None,
+        answer_events: bool = True,
+    ) -> None:
         self.gateway_sn = gateway_sn
+        self.answer_events = answer_events  # a real cloud answers events that carry need_reply
         self.messages: list[tuple[str, dict[str, Any] | None, bytes]] = []
         self._lock = threading.Lock()
         self._new = threading.Condition(self._lock)
@@ -70,6 +79,17 @@ class CloudClient:
         with self._new:
             self.messages.append((msg.topic, body, bytes(msg.payload)))
             self._new.notify_all()
+        wants_reply = isinstance(body, dict) and body.get("need_reply") == 1
+        if self.answer_events and wants_reply and msg.topic.endswith("/events"):
+            assert isinstance(body, dict)
+            reply = {
+                "tid": body.get("tid"),
+                "bid": body.get("bid"),
+                "timestamp": int(time.time() * 1000),
+                "method": body.get("method"),
+                "data": {"result": 0},
+            }
+            client.publish(msg.topic + "_reply", json.dumps(reply), qos=1)
 
     def publish(self, topic: str, payload: bytes | str | dict[str, Any], qos: int = 1) -> None:
         if isinstance(payload, dict):

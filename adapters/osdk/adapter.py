@@ -77,6 +77,7 @@ CONTROL_OBTAINED, CONTROL_RELEASED = 0x0002, 0x0001
 CONTROL_IN_PROGRESS = (0x0003, 0x0004)
 CONTROL_RC_OWNS = (0x0000, 0x0005, 0x0006)
 TASK_TAKEOFF, TASK_LAND, TASK_GO_HOME = 1, 2, 6
+AUTO_TAKEOFF = 11  # display mode while the FC's own take-off runs: missions are refused until it ends
 
 
 @dataclass
@@ -114,6 +115,7 @@ class Task:
     points: int
     done: asyncio.Event = field(default_factory=asyncio.Event)
     reached: int = -1
+    offset: int = 0  # waypoints the gateway prepended: the cloud's index = mission index - offset
     finished: bool = False
     failed: int | None = None
 
@@ -480,7 +482,8 @@ class AircraftAdapter(Adapter):
             index = int(f["waypoint_index"])
             if index > task.reached:
                 task.reached = index
-                self._progress(task, "wayline_progress", index)
+                if index >= task.offset:
+                    self._progress(task, "wayline_progress", index - task.offset)
         elif incident == 1:  # mission finished
             task.finished = True
             task.done.set()
@@ -627,20 +630,29 @@ class AircraftAdapter(Adapter):
 
     async def _watch(self, task: Task) -> None:
         await task.done.wait()
+        last = task.points - 1 - task.offset
         if task.failed is not None:
-            self._progress(task, "wayline_failed", task.reached, task.failed)
+            self._progress(task, "wayline_failed", task.reached - task.offset, task.failed)
         elif task.finished:
-            self._progress(task, "wayline_ok", task.points - 1)
+            self._progress(task, "wayline_ok", last)
             if task.kind == "takeoff":
-                self._progress(task, "task_finish", task.points - 1)
+                self._progress(task, "task_finish", last)
 
     async def _fly_to_point(self, data: Any) -> CallResult:
         self._require_online()
         if data.max_speed <= 0:
             raise InvalidParameters("max_speed must be at least 1 m/s to fly")
-        points = [(p.latitude, p.longitude, self._relative(p.height)) for p in data.points]
+        t = self.telemetry
+        if t.flight != IN_AIR:
+            raise DeviceRejected(
+                ResultCode.BUSY, "fly_to_point needs the aircraft in the air (use takeoff_to_point)"
+            )
+        # A ground-station mission needs at least two waypoints (DJI's minimum): the first is where the
+        # aircraft is now, so the cloud's points keep their indexes shifted by one (undone in events).
+        here = (t.latitude or 0.0, t.longitude or 0.0, t.height or 0.0)
+        points = [here, *((p.latitude, p.longitude, self._relative(p.height)) for p in data.points)]
         await self._upload(points, data.max_speed)
-        task = Task("fly_to", data.fly_to_id, len(points))
+        task = Task("fly_to", data.fly_to_id, len(points), offset=1)
         self.mission = task
         await self._gs("wp_start_stop", {"start": 0})
         self._start_watch(task)
@@ -654,7 +666,7 @@ class AircraftAdapter(Adapter):
             task.finished = True  # no wayline_ok for a cancelled task
             if self._mission_task is not None:
                 self._mission_task.cancel()
-            self._progress(task, "wayline_cancel", task.reached)
+            self._progress(task, "wayline_cancel", task.reached - task.offset)
         return CallResult()
 
     async def _takeoff_to_point(self, data: Any) -> CallResult:
@@ -674,7 +686,7 @@ class AircraftAdapter(Adapter):
         """After the take-off ACK: wait until airborne, then fly up and over to the target."""
         deadline = self._now() + self.settings.takeoff_timeout
         t = self.telemetry
-        while not (t.flight == IN_AIR and (t.height or 0.0) >= 1.0):
+        while not (t.flight == IN_AIR and (t.height or 0.0) >= 1.0 and t.display_mode != AUTO_TAKEOFF):
             if self._now() > deadline:
                 self._progress(task, "wayline_failed", 0, ResultCode.DEVICE_TIMEOUT)
                 return
@@ -693,7 +705,6 @@ class AircraftAdapter(Adapter):
         except (DeviceTimeout, DeviceNotConnected):
             self._progress(task, "wayline_failed", 0, ResultCode.DEVICE_TIMEOUT)
             return
-        self._progress(task, "wayline_progress", 0)
         await self._watch(task)
 
     def _extension(self, method: str) -> Callable[[Any], Any]:

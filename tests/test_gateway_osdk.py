@@ -1,0 +1,185 @@
+"""The Onboard SDK aircraft end to end: a cloud-side paho client → mosquitto → the gateway → the
+open protocol on a real pseudo-terminal → the simulated flight controller, and back as replies,
+progress events and osd."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from adapters.osdk.sim import OsdkFcDevice, OsdkFcModel
+from adapters.simio import PtyEndpoint
+from gateway.local_broker import LocalBroker
+from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
+
+pytestmark = pytest.mark.broker
+
+GW = "GW-TEST-1"
+SN = "OSDK-T-1"
+HOME = (22.5431, 113.958)
+HOME_ALT = 50.0  # the simulator's WGS84 altitude of the take-off point
+
+
+def _north_east(lat: float, lon: float, north: float, east: float) -> tuple[float, float]:
+    dlat = math.degrees(north / 6_378_137.0)
+    dlon = math.degrees(east / (6_378_137.0 * math.cos(math.radians(lat))))
+    return lat + dlat, lon + dlon
+
+
+def _distance(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
+    n = math.radians(lat2 - lat1) * 6_378_137.0
+    e = math.radians(lon2 - lon1) * 6_378_137.0 * math.cos(math.radians(lat1))
+    return math.hypot(n, e)
+
+
+@pytest.fixture
+def rig(broker: LocalBroker) -> Iterator[dict[str, Any]]:
+    device = OsdkFcDevice(OsdkFcModel(home=HOME, home_altitude=HOME_ALT))
+    pty = PtyEndpoint(device).start()
+    settings = gateway_settings(broker.port, [{"type": "osdk", "sn": SN, "url": pty.path, "app_id": 1234}])
+    cloud = CloudClient(broker.host, broker.port, GW)
+    gw = GatewayThread(settings).start()
+    try:
+        cloud.wait_for("status", lambda b: [d["sn"] for d in b["data"]["sub_devices"]] == [SN], timeout=10)
+        yield {"fc": device, "cloud": cloud, "gw": gw, "adapter": gw.app.devices.by_sn(SN)}
+    finally:
+        gw.stop()
+        cloud.close()
+        pty.stop()
+
+
+def _events(cloud: CloudClient, method: str) -> list[dict[str, Any]]:
+    return [b["data"] for b in cloud.find("/events", lambda b: b.get("method") == method)]
+
+
+def _take_off(cloud: CloudClient, north: float = 30.0, height: float = 20.0) -> tuple[float, float]:
+    target = _north_east(*HOME, north, 0.0)
+    data = {
+        "target_latitude": target[0],
+        "target_longitude": target[1],
+        "target_height": HOME_ALT + height,
+        "security_takeoff_height": 15.0,
+        "rth_altitude": 30,
+        "flight_id": "flight-1",
+        "max_speed": 12,
+    }
+    assert cloud.service("takeoff_to_point", data)["data"]["result"] == 0
+    return target
+
+
+def test_activation_topology_and_osd(rig: dict[str, Any]) -> None:
+    fc, cloud = rig["fc"], rig["cloud"]
+    assert fc.inspect(lambda m: m.activated) and fc.inspect(lambda m: m.actions["activate"]) >= 1
+    osd = cloud.wait_for(f"{SN}/osd", lambda b: "latitude" in b["data"])[-1]["data"]
+    assert _distance(osd["latitude"], osd["longitude"], *HOME) < 1.0
+    assert abs(osd["height"] - HOME_ALT) < 0.5 and osd["mode_code"] == 0
+    assert osd["battery"]["capacity_percent"] > 0
+
+
+def test_takeoff_fly_to_and_stop(rig: dict[str, Any]) -> None:
+    fc, cloud = rig["fc"], rig["cloud"]
+    # without flight authority the cloud may not fly
+    here = [{"latitude": HOME[0], "longitude": HOME[1], "height": 60.0}]
+    refused = cloud.service("fly_to_point", {"fly_to_id": "x", "max_speed": 5, "points": here})
+    assert refused["data"]["result"] == 319030
+    assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
+    cloud.wait_for(f"{SN}/state", lambda b: b["data"].get("control_source") == "A")
+
+    target = _take_off(cloud)
+    takeoff = lambda: _events(cloud, "takeoff_to_point_progress")  # noqa: E731
+    wait_until(
+        lambda: any(e["status"] == "task_finish" for e in takeoff()), 40, what="take-off task finished"
+    )
+    progress = [(e["status"], e["way_point_index"]) for e in takeoff()]
+    expected = [("task_ready", 0), ("wayline_progress", 0), ("wayline_progress", 1), ("wayline_ok", 1)]
+    assert progress == [*expected, ("task_finish", 1)], progress
+    assert all(e["flight_id"] == "flight-1" and e["result"] == 0 for e in takeoff())
+    osd = cloud.wait_for(
+        f"{SN}/osd", lambda b: _distance(b["data"]["latitude"], b["data"]["longitude"], *target) < 2.0
+    )
+    assert abs(osd[-1]["data"]["elevation"] - 20.0) < 1.5
+
+    # fly to two points; progress in order, then wayline_ok, and the aircraft ends at the last point
+    p1 = _north_east(*HOME, 30.0, 40.0)
+    p2 = _north_east(*HOME, -10.0, 40.0)
+    points = [{"latitude": p[0], "longitude": p[1], "height": HOME_ALT + 25.0} for p in (p1, p2)]
+    assert (
+        cloud.service("fly_to_point", {"fly_to_id": "fly-1", "max_speed": 12, "points": points})["data"][
+            "result"
+        ]
+        == 0
+    )
+    wait_until(lambda: any(e["status"] == "wayline_ok" for e in _events(cloud, "fly_to_point_progress")), 40,
+               what="fly-to finished")  # fmt: skip
+    events = [(e["status"], e["way_point_index"]) for e in _events(cloud, "fly_to_point_progress")]
+    assert events == [("wayline_progress", 0), ("wayline_progress", 1), ("wayline_ok", 1)], events
+    assert all(
+        e["fly_to_id"] == "fly-1" and e["result"] == 0 for e in _events(cloud, "fly_to_point_progress")
+    )
+    osd = cloud.wait_for(
+        f"{SN}/osd", lambda b: _distance(b["data"]["latitude"], b["data"]["longitude"], *p2) < 1.5
+    )
+    assert abs(osd[-1]["data"]["height"] - (HOME_ALT + 25.0)) < 1.5
+    # events asked for a reply: the cloud answers, and the gateway stops re-sending
+    assert rig["gw"].app.metrics.count("events_published_total", method="fly_to_point_progress") >= 3
+
+    # a far point is refused by the flight controller: 336000 + 0xC7 ("too far"), text in output
+    far = _north_east(*HOME, 5000.0, 0.0)
+    far_points = [{"latitude": far[0], "longitude": far[1], "height": HOME_ALT + 30}]
+    r = cloud.service("fly_to_point", {"fly_to_id": "far", "max_speed": 10, "points": far_points})
+    assert r["data"]["result"] == 336000 + 0xC7 and "too far" in r["data"]["output"]["reason"]
+
+    # stop mid-flight: wayline_cancel, and the aircraft stops short of the point
+    back = [{"latitude": HOME[0], "longitude": HOME[1], "height": HOME_ALT + 25.0}]
+    assert (
+        cloud.service("fly_to_point", {"fly_to_id": "fly-2", "max_speed": 5, "points": back})["data"][
+            "result"
+        ]
+        == 0
+    )
+    time.sleep(1.0)
+    assert cloud.service("fly_to_point_stop", {})["data"]["result"] == 0
+    cancel = {"fly_to_id": "fly-2", "status": "wayline_cancel"}
+    cloud.wait_for(
+        "events", lambda b: b.get("method") == "fly_to_point_progress" and cancel.items() <= b["data"].items()
+    )
+    wait_until(lambda: fc.inspect(lambda m: m.speed) < 0.2, 10, what="hovering after the stop")
+    assert fc.inspect(lambda m: _distance(m.latitude, m.longitude, *HOME)) > 5.0
+
+
+def test_rc_takeover_drops_authority(rig: dict[str, Any]) -> None:
+    fc, cloud = rig["fc"], rig["cloud"]
+    assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
+    cloud.wait_for(f"{SN}/state", lambda b: b["data"].get("control_source") == "A")
+    fc.rc_takeover()
+    event = cloud.wait_for("events", lambda b: b.get("method") == "joystick_invalid_notify")[0]
+    assert event["data"] == {"reason": 4} and event["need_reply"] == 1
+    cloud.wait_for(f"{SN}/state", lambda b: b["data"].get("control_source") == "")
+    # with the RC in P mode the flight controller refuses to hand control back
+    r = cloud.service("flight_authority_grab", {})
+    assert r["data"]["result"] == 319030 and "RC" in r["data"]["output"]["reason"]
+
+
+def test_ack_loss_is_retransmitted_and_acted_on_once(rig: dict[str, Any]) -> None:
+    fc, cloud = rig["fc"], rig["cloud"]
+    before = fc.inspect(lambda m: m.actions["obtain_control"])
+    dups = fc.inspect(lambda m: m.duplicates)
+    fc.drop_acks(1)  # the FC acts, but its ACK is lost: the gateway resends the same frame (session, seq)
+    assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
+    assert fc.inspect(lambda m: m.actions["obtain_control"]) == before + 1  # acted on once
+    assert fc.inspect(lambda m: m.duplicates) == dups + 1  # the resend was recognised and re-ACKed
+
+
+def test_a_late_ack_is_an_error_and_matches_nothing_later(rig: dict[str, Any]) -> None:
+    fc, cloud, adapter = rig["fc"], rig["cloud"], rig["adapter"]
+    fc.inspect(lambda m: setattr(m, "ack_delay", 3.0))  # later than every retry and the deadline
+    t0 = time.monotonic()
+    r = cloud.service("flight_authority_grab", {})
+    assert r["data"]["result"] == 325004 and time.monotonic() - t0 < 3.0
+    fc.inspect(lambda m: setattr(m, "ack_delay", 0.0))
+    wait_until(lambda: adapter.late_acks >= 1, 6, what="the late ACK arrived and was dropped")
+    assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
