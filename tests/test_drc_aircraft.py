@@ -1,0 +1,170 @@
+"""Live flight control of the simulated Onboard SDK aircraft over a real pty: sticks move it, and
+every failsafe stops it — sticks stopping, heartbeats stopping, the broker dying, an emergency stop —
+also while the MQTT side is flooded with sticks or the device link is stalled."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import threading
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from adapters.osdk.sim import OsdkFcDevice, OsdkFcModel
+from adapters.simio import PtyEndpoint
+from gateway.local_broker import LocalBroker
+from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
+
+pytestmark = pytest.mark.broker
+
+GW = "GW-TEST-1"
+SN = "OSDK-DRC-1"
+
+
+def _setpoint(fc: OsdkFcDevice) -> tuple[float, float] | None:
+    """The forward/right velocity the flight controller was last told (body frame), or None."""
+    return fc.inspect(lambda m: None if m._sp is None else (m._sp.x, m._sp.y))
+
+
+@pytest.fixture
+def rig(private_broker: LocalBroker) -> Iterator[dict[str, Any]]:
+    fc = OsdkFcDevice(OsdkFcModel())
+    pty = PtyEndpoint(fc).start()
+    settings = gateway_settings(
+        private_broker.port,
+        [{"type": "osdk", "sn": SN, "url": pty.path}],
+        drc={"heartbeat_timeout": 1.5, "stick_timeout": 0.5, "stream_hz": 25},
+    )
+    cloud = CloudClient(private_broker.host, private_broker.port, GW)
+    gw = GatewayThread(settings).start()
+    try:
+        cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1, timeout=10)
+        assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
+        adapter = gw.app.devices.by_sn(SN)
+        asyncio.run_coroutine_threadsafe(adapter._flight_task(1), gw.loop).result(5)  # take off
+        wait_until(lambda: fc.inspect(lambda m: m.in_air and m.display_mode == 6), 10, what="airborne")
+        same = {"address": f"127.0.0.1:{private_broker.port}", "client_id": "drc", "username": "",
+                "password": "", "expire_time": 0, "enable_tls": False}  # fmt: skip
+        r = cloud.service("drc_mode_enter", {"mqtt_broker": same, "osd_frequency": 10, "hsi_frequency": 2})
+        assert r["data"]["result"] == 0
+        yield {"fc": fc, "pty": pty, "cloud": cloud, "gw": gw, "broker": private_broker}
+    finally:
+        gw.stop()
+        cloud.close()
+        pty.stop()
+
+
+def _down(cloud: CloudClient, method: str, data: dict[str, Any]) -> None:
+    cloud.publish(f"thing/product/{GW}/drc/down", json.dumps({"method": method, "data": data}), qos=0)
+
+
+def test_sticks_fly_the_aircraft_and_stopping_them_brakes(rig: dict[str, Any]) -> None:
+    fc, cloud = rig["fc"], rig["cloud"]
+    _down(cloud, "heart_beat", {"seq": 1, "timestamp": 11})
+    assert cloud.wait_for("drc/up", lambda b: b["method"] == "heart_beat")[0]["data"] == {
+        "seq": 1,
+        "timestamp": 11,
+    }
+    for seq in range(1, 11):  # 10 Hz sticks: 3 m/s forward (seed: +y forward)
+        _down(cloud, "drone_control", {"seq": seq, "y": 3.0})
+        time.sleep(0.1)
+    wait_until(lambda: fc.inspect(lambda m: m.vn) > 2.0, 5, what="the aircraft flies north")
+    assert _setpoint(fc) == (3.0, 0.0)
+    # the pushes of live control arrive on drc/up
+    osd = cloud.wait_for("drc/up", lambda b: b["method"] == "osd_info_push")[-1]["data"]
+    assert {"latitude", "longitude", "height", "speed_x", "attitude_head"} <= osd.keys()
+    cloud.wait_for("drc/up", lambda b: b["method"] == "hsi_info_push")
+    # sticks stop: a zero set-point reaches the flight controller within 0.5 s plus one stream period
+    last = time.monotonic()
+    zero_at = wait_until(
+        lambda: _setpoint(fc) == (0.0, 0.0) and time.monotonic(), 3, interval=0.002, what="zero"
+    )
+    assert zero_at - last < 0.5 + 0.04 + 0.3
+    wait_until(lambda: fc.inspect(lambda m: m.speed) < 0.3, 5, what="braked to a hover")
+    assert cloud.service("drc_mode_exit", {})["data"]["result"] == 0
+
+
+def test_heartbeats_stop_while_sticks_flood_in(rig: dict[str, Any]) -> None:
+    fc, cloud, gw = rig["fc"], rig["cloud"], rig["gw"]
+    stop = threading.Event()
+
+    def flood() -> None:  # sticks as fast as paho can publish them, no heartbeats
+        seq = 1
+        while not stop.is_set():
+            _down(cloud, "drone_control", {"seq": seq, "y": 2.0})
+            seq += 1
+            if seq % 200 == 0:
+                time.sleep(0.01)
+
+    t = threading.Thread(target=flood, daemon=True)
+    _down(cloud, "heart_beat", {"seq": 1, "timestamp": 1})
+    t.start()
+    try:
+        wait_until(lambda: _setpoint(fc) == (2.0, 0.0), 5, what="flying under the flood")
+        # heartbeats are overdue: stop and 514301, even with the sticks still pouring in
+        cloud.wait_for(
+            "events", lambda b: b["method"] == "drc_status_notify" and b["data"]["result"] == 514301
+        )
+        wait_until(lambda: _setpoint(fc) == (0.0, 0.0), 3, what="stopped without heartbeats")
+        # heartbeats are still echoed one by one in the middle of the flood
+        for i in range(20):
+            _down(cloud, "heart_beat", {"seq": 100 + i, "timestamp": 1000 + i})
+        cloud.wait_for("drc/up", lambda b: b["method"] == "heart_beat" and b["data"]["seq"] >= 100, count=20)
+    finally:
+        stop.set()
+        t.join(2)
+    assert gw.app.metrics.count("drc_failsafe_stops_total", reason="heartbeat") >= 1
+
+
+def test_emergency_stop_brakes_and_holds(rig: dict[str, Any]) -> None:
+    fc, cloud = rig["fc"], rig["cloud"]
+    _down(cloud, "heart_beat", {"seq": 1, "timestamp": 1})
+    for seq in range(1, 6):
+        _down(cloud, "drone_control", {"seq": seq, "x": -4.0})  # seed: +x left, so -x is right (east)
+        time.sleep(0.05)
+    wait_until(lambda: fc.inspect(lambda m: m.ve) > 1.0, 5, what="flying east")
+    _down(cloud, "drone_emergency_stop", {})
+    assert cloud.wait_for("drc/up", lambda b: b["method"] == "drone_emergency_stop")[0]["data"]["result"] == 0
+    wait_until(lambda: fc.inspect(lambda m: m.actions["emergency_brake"]) >= 1, 3, what="brake frame")
+    wait_until(lambda: fc.inspect(lambda m: m.speed) < 0.3, 5, what="braked")
+    _down(cloud, "drone_control", {"seq": 6, "x": -4.0})
+    held = cloud.wait_for(
+        "drc/up", lambda b: b["method"] == "drone_control" and b["data"]["output"]["seq"] == 6
+    )
+    assert held[0]["data"]["result"] == 314000
+    assert fc.inspect(lambda m: m.speed) < 0.3
+
+
+def test_broker_killed_mid_drc_stops_the_aircraft(rig: dict[str, Any]) -> None:
+    fc, cloud, broker = rig["fc"], rig["cloud"], rig["broker"]
+    _down(cloud, "heart_beat", {"seq": 1, "timestamp": 1})
+    for seq in range(1, 6):
+        _down(cloud, "drone_control", {"seq": seq, "y": 3.0})
+        time.sleep(0.05)
+    wait_until(lambda: _setpoint(fc) == (3.0, 0.0), 5, what="flying")
+    cloud.client.loop_stop()
+    broker.stop(kill=True)
+    wait_until(lambda: _setpoint(fc) == (0.0, 0.0), 3, what="stopped with the broker gone")
+    wait_until(lambda: fc.inspect(lambda m: m.speed) < 0.3, 5, what="hovering")
+
+
+def test_a_stalled_device_link_does_not_stall_the_gateway(rig: dict[str, Any]) -> None:
+    fc, pty, cloud = rig["fc"], rig["pty"], rig["cloud"]
+    _down(cloud, "heart_beat", {"seq": 1, "timestamp": 1})
+    _down(cloud, "drone_control", {"seq": 1, "y": 2.0})
+    wait_until(lambda: _setpoint(fc) == (2.0, 0.0), 5, what="flying")
+    pty.paused = True  # the flight controller stops reading and answering
+    try:
+        for i in range(5):
+            _down(cloud, "heart_beat", {"seq": 10 + i, "timestamp": 10 + i})
+        cloud.wait_for("drc/up", lambda b: b["method"] == "heart_beat" and b["data"]["seq"] >= 10, count=5)
+        t0 = time.monotonic()
+        r = cloud.service("x_osdk_hotpoint_stop", {})
+        assert r["data"]["result"] in (325004, 325012) and time.monotonic() - t0 < 3.0
+    finally:
+        pty.paused = False
+    # once the link moves again, the zero set-point (sticks stopped meanwhile) reaches the aircraft
+    wait_until(lambda: _setpoint(fc) == (0.0, 0.0), 5, what="zero after the stall")
