@@ -66,6 +66,7 @@ class LocalBroker:
         allow_anonymous: bool = True,
         workdir: Path | None = None,
         users: dict[str, str] | None = None,
+        persistence: bool = False,
     ) -> None:
         self.host = "127.0.0.1"
         self.port = port or free_port()
@@ -96,7 +97,9 @@ class LocalBroker:
                     f"user {getpass.getuser()}",
                     listener,
                     f"allow_anonymous {'true' if allow_anonymous else 'false'}",
-                    "persistence false",
+                    f"persistence {'true' if persistence else 'false'}",
+                    f"persistence_location {self._dir}/",
+                    "autosave_interval 1",
                     "set_tcp_nodelay true",
                     "max_queued_messages 10000",
                     f"log_dest file {self.log_path}",
