@@ -22,6 +22,7 @@ from adapters.robomaster.extensions import EVENT_EXTENSIONS as ROBOMASTER_EVENT_
 from adapters.robomaster.extensions import EXTENSIONS as ROBOMASTER_EXTENSIONS
 from adapters.rsdk.adapter import GimbalAdapter
 from adapters.rsdk.extensions import EXTENSIONS as RSDK_EXTENSIONS
+from gateway import logcontext
 from gateway.clock import Clock, SystemClock
 from gateway.devices import DeviceTable
 from gateway.dispatcher import Dispatcher
@@ -29,6 +30,7 @@ from gateway.drc import DrcController
 from gateway.metrics import Metrics
 from gateway.mqtt import MqttBridge
 from gateway.northbound import Northbound
+from gateway.observability import Observability
 from gateway.settings import GatewaySettings
 from schemas import TopicKind, default_registry, subscriptions, topic
 from schemas.registry import Registry
@@ -81,6 +83,7 @@ class GatewayApp:
         self.settings = settings
         self.clock = clock or SystemClock()
         self.metrics = metrics or Metrics()
+        logcontext.register_secrets_in(settings)  # broker password, device secrets: masked in every log line
         self.registry = build_registry()
         self.devices = DeviceTable(adapters if adapters is not None else build_adapters(settings))
         self.stop_event = asyncio.Event()
@@ -89,6 +92,7 @@ class GatewayApp:
         self.dispatcher: Dispatcher | None = None
         self.northbound: Northbound | None = None
         self.drc: DrcController | None = None
+        self.observability: Observability | None = None  # /metrics, /healthz, /status (None: off)
 
     async def run(self) -> None:
         loop = asyncio.get_running_loop()
@@ -147,6 +151,8 @@ class GatewayApp:
         self.bridge.start()
         periodic = loop.create_task(self.northbound.run(self.stop_event), name="northbound")
         consumer = loop.create_task(self._consume(), name="inbound")
+        if s.metrics.enabled:
+            self.observability = Observability(self, loop).start(s.metrics.host, s.metrics.port)
         self.started.set()
         log.info("gateway %s running with %d device(s)", gw, len(self.devices))
         try:
@@ -189,4 +195,6 @@ class GatewayApp:
         if self.bridge is not None:
             await asyncio.to_thread(self.bridge.stop, offline)
         await asyncio.gather(*(a.stop() for a in self.devices), return_exceptions=True)
+        if self.observability is not None:
+            await asyncio.to_thread(self.observability.stop)
         log.info("stopped")

@@ -34,6 +34,7 @@ __all__ = [
     "DispatcherSettings",
     "DrcSettings",
     "GatewaySettings",
+    "MetricsSettings",
     "ProductSettings",
     "RsdkDeviceSettings",
     "load_settings",
@@ -132,6 +133,18 @@ class DrcSettings(BaseModel):
     swap_xy: bool = Field(False, description="true when your cloud sends x forward and y sideways")
 
 
+class MetricsSettings(BaseModel):
+    """The HTTP endpoint for Prometheus (``/metrics``), health checks (``/healthz``) and ``dji-gateway
+    status`` (``/status``)."""
+
+    model_config = _STRICT
+    enabled: bool = Field(True, description="serve /metrics, /healthz and /status")
+    host: str = Field(
+        "127.0.0.1", description="listen address; 0.0.0.0 in a container that Prometheus scrapes"
+    )
+    port: int = Field(9108, ge=0, le=65535, description="HTTP port (0: any free port, logged at start)")
+
+
 DeviceSettings = Annotated[
     RsdkDeviceSettings | OsdkDeviceSettings | RobomasterDeviceSettings, Field(discriminator="type")
 ]
@@ -147,6 +160,7 @@ class GatewaySettings(BaseSettings):
     broker: BrokerSettings = BrokerSettings()
     dispatcher: DispatcherSettings = DispatcherSettings()
     drc: DrcSettings = DrcSettings()
+    metrics: MetricsSettings = MetricsSettings()
     devices: list[DeviceSettings] = Field(default_factory=list)
     osd_period: float = Field(2.0, gt=0, description="periodic osd (0.5 Hz by default, per device override)")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
