@@ -50,6 +50,8 @@ class SerialLink:
         self._generation = 0
         self.bytes_in = 0
         self.bytes_out = 0
+        self.frames_out = 0  # write() calls: every adapter here writes one whole frame per call
+        self.opens = 0  # successful opens (the first one and every reopen), for the reconnect metric
 
     @property
     def up(self) -> bool:
@@ -80,6 +82,7 @@ class SerialLink:
         for t in self._threads:
             t.start()
         self._up = True
+        self.opens += 1
         log.info("serial link open: %s @ %d", self.url, self.baudrate)
 
     def _make_port(self) -> serial.SerialBase:
@@ -96,6 +99,7 @@ class SerialLink:
         if not self._up:
             raise LinkError(f"serial link {self.url} is down")
         self._writeq.put(bytes(data))
+        self.frames_out += 1
 
     def close(self) -> None:
         self._up = False

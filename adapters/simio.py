@@ -145,16 +145,22 @@ class PtyEndpoint(_Endpoint):
 
 
 class TcpEndpoint(_Endpoint):
-    """Listens on 127.0.0.1:``port`` (0 = any free port); the host opens :attr:`url`."""
+    """Listens on 127.0.0.1:``port`` (0 = any free port); the host opens :attr:`url`.
 
-    def __init__(self, device: StreamDevice, port: int = 0, tick_interval: float = 0.01) -> None:
+    ``host`` defaults to ``$DJIGW_SIM_HOST`` or loopback: a simulator in its own container (the
+    compose stack) listens on ``0.0.0.0`` so the gateway's container can reach it by service name."""
+
+    def __init__(
+        self, device: StreamDevice, port: int = 0, tick_interval: float = 0.01, host: str | None = None
+    ) -> None:
         super().__init__(device, tick_interval)
+        host = host or os.environ.get("DJIGW_SIM_HOST") or "127.0.0.1"
         self._server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self._server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        self._server.bind(("127.0.0.1", port))
+        self._server.bind((host, port))
         self._server.listen(1)
         self.port = int(self._server.getsockname()[1])
-        self.url = f"socket://127.0.0.1:{self.port}"
+        self.url = f"socket://{'127.0.0.1' if host == '0.0.0.0' else host}:{self.port}"
         self._client: socket.socket | None = None
 
     def _fd(self) -> int | None:

@@ -10,7 +10,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from gateway import codec_cli, run_cli
+from gateway import codec_cli, config_cli, console, run_cli, status_cli
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -20,6 +20,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     run_cli.add_parsers(sub)
+    console.add_parsers(sub)
+    status_cli.add_parsers(sub)
+    config_cli.add_parsers(sub)
     codec_cli.add_parsers(sub)
 
     schema = sub.add_parser("schema", help="Cloud API contract tools")

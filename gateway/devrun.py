@@ -1,8 +1,9 @@
 """``make run``: the gateway with simulated devices against a local broker, in one command.
 
-Uses the broker given by ``BROKER`` (``mqtt://host:port``) when one answers there; otherwise
-starts a private mosquitto on ``PORT`` (default 1883, or a free port when 1883 is taken by
-something that is not an MQTT broker we may use) and stops it on exit. Prints where to publish.
+Uses the broker given by ``BROKER`` (``mqtt://host:port``) when set; otherwise the one already
+listening on 127.0.0.1:``PORT`` (default 1883, the port ``dji-gateway send``/``monitor`` use by
+default), or else starts a private mosquitto there (``PORT=0``: any free port) and stops it on exit.
+Prints where to publish and the console commands that drive the simulated devices.
 """
 
 from __future__ import annotations
@@ -12,7 +13,15 @@ import sys
 from collections.abc import Sequence
 
 from gateway.local_broker import LocalBroker, free_port, port_open
-from gateway.run_cli import SIM_GATEWAY_SN, SIM_GIMBAL_PAYLOAD_INDEX, SIM_GIMBAL_SN
+from gateway.run_cli import (
+    SIM_AIRCRAFT_SN,
+    SIM_GATEWAY_SN,
+    SIM_GIMBAL_PAYLOAD_INDEX,
+    SIM_GIMBAL_SN,
+    SIM_ROBOT_SN,
+)
+
+DEFAULT_PORT = 1883
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -21,7 +30,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     url = os.environ.get("BROKER")
     broker: LocalBroker | None = None
     if url is None:
-        port = int(os.environ.get("PORT", "0")) or free_port()
+        port = int(os.environ.get("PORT", str(DEFAULT_PORT))) or free_port()
         if port_open("127.0.0.1", port):
             url = f"mqtt://127.0.0.1:{port}"
             print(f"using the broker already listening on 127.0.0.1:{port}")
@@ -31,16 +40,23 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"started mosquitto on 127.0.0.1:{broker.port} (stopped when the gateway exits)")
     host_port = url.split("://", 1)[1]
     host, _, port_text = host_port.partition(":")
+    console_broker = "" if url == f"mqtt://127.0.0.1:{DEFAULT_PORT}" else f" --broker {url}"
     print(
         f"""
 dji-gateway with simulated devices
   broker          {url}
   gateway sn      {SIM_GATEWAY_SN}
   gimbal          sn {SIM_GIMBAL_SN}, payload_index {SIM_GIMBAL_PAYLOAD_INDEX}
+  robot           sn {SIM_ROBOT_SN}
+  aircraft        sn {SIM_AIRCRAFT_SN}
 publish Cloud API services to  thing/product/{SIM_GATEWAY_SN}/services
 replies arrive on              thing/product/{SIM_GATEWAY_SN}/services_reply
-telemetry                      thing/product/{SIM_GIMBAL_SN}/osd, sys/product/{SIM_GATEWAY_SN}/status
-e.g.  mosquitto_sub -h {host} -p {port_text or 1883} -t 'thing/product/#' -t 'sys/product/#' -v
+telemetry                      thing/product/<device sn>/osd, sys/product/{SIM_GATEWAY_SN}/status
+watch it:      dji-gateway monitor --gateway-sn {SIM_GATEWAY_SN}{console_broker}
+drive it:      dji-gateway send payload_authority_grab payload_index={SIM_GIMBAL_PAYLOAD_INDEX} \
+--gateway-sn {SIM_GATEWAY_SN}{console_broker}
+raw MQTT:      mosquitto_sub -h {host} -p {port_text or 1883} -t 'thing/product/#' -t 'sys/product/#' -v
+status:        dji-gateway status   (metrics on http://127.0.0.1:9108/metrics unless --metrics-port)
 Ctrl-C stops the gateway (motion first, then the offline topology).
 """,
         flush=True,

@@ -32,6 +32,7 @@ from adapters.base import (
     InvalidParameters,
     MethodNotSupported,
 )
+from gateway import logcontext
 from gateway.clock import Clock
 from gateway.devices import DeviceTable
 from gateway.metrics import Metrics
@@ -109,6 +110,11 @@ class Dispatcher:
         self._pending = 0
         self._tasks: set[asyncio.Task[None]] = set()
 
+    @property
+    def in_flight(self) -> int:
+        """Requests being executed now (``max_pending`` bounds it)."""
+        return self._pending
+
     # -- entry points ---------------------------------------------------------------------------
     def submit(self, topic_name: str, payload: bytes, oversize: bool = False) -> None:
         """Start handling one message in its own task, so a slow device delays nobody else."""
@@ -174,6 +180,7 @@ class Dispatcher:
                 TopicKind.SERVICES, payload, exc, timestamp=self.clock.time_ms(), gateway=self.gateway_sn
             )
             method = _peek(_METHOD, payload) or "?"
+            logcontext.set_context(method=_metric_method(method), tid=_peek(_TID, payload))
             self.metrics.inc("services_total", method=_metric_method(method), result=_result_of(reply))
             if reply is None:
                 if not self._reply_raw(payload, ResultCode.INVALID_PARAMETERS, "malformed message"):
@@ -185,6 +192,10 @@ class Dispatcher:
             return
 
         tid = request.tid
+        # this task's log lines (the adapter's too) carry method and tid; a secret that arrived in the
+        # request (drc_mode_enter's broker password) is masked in every log line from now on
+        logcontext.set_context(method=request.method, tid=tid)
+        logcontext.register_secrets_in(request.data, permanent=False)
         cached = self._cache_lookup(tid)
         if cached is not None:
             self.metrics.inc("services_duplicates_total")
@@ -203,8 +214,16 @@ class Dispatcher:
             request, int(result), output, timestamp=self.clock.time_ms(), gateway=self.gateway_sn
         )
         raw = reply.model_dump_json().encode()
+        elapsed = self.clock.monotonic() - started
         self.metrics.inc("services_total", method=_metric_method(request.method), result=int(result))
-        self.metrics.observe("services_latency_seconds", self.clock.monotonic() - started)
+        self.metrics.observe("services_latency_seconds", elapsed, method=_metric_method(request.method))
+        log.log(
+            logging.DEBUG if result == 0 else logging.INFO,
+            "answered %s with %s in %.1f ms",
+            request.method,
+            int(result),
+            elapsed * 1000,
+        )
         self._publish_reply(raw, entry)
 
     async def _execute(self, request: Any) -> tuple[int, dict[str, Any] | None]:
@@ -295,6 +314,7 @@ class Dispatcher:
 
     async def _call(self, adapter: Adapter, method: str, data: Any) -> tuple[int, dict[str, Any] | None]:
         sn = adapter.info.sn
+        logcontext.set_context(device=sn)
         if not adapter.online:
             return ResultCode.DEVICE_NOT_CONNECTED, {"reason": f"device {sn} is not connected"}
         try:

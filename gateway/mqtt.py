@@ -32,7 +32,7 @@ from gateway.settings import BrokerSettings
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Backoff", "Inbound", "MqttBridge"]
+__all__ = ["Backoff", "Inbound", "MqttBridge", "close_client"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,6 +43,13 @@ class Inbound:
     topic: str
     payload: bytes
     oversize: bool = False
+
+
+def close_client(client: paho.Client) -> None:
+    """Release the sockets paho keeps after ``loop_stop`` (its wake-up socket pair stays open until the
+    client object is collected, which a reference cycle can delay: an unclosed-socket warning later)."""
+    with contextlib.suppress(Exception):
+        client._reset_sockets()  # private, but the only way; harmless when already closed
 
 
 class Backoff:
@@ -95,9 +102,12 @@ class MqttBridge:
         self._connected = asyncio.Event()
         self._subscribed = threading.Event()  # set once the broker acknowledged every subscription
         self._sub_mid: int | None = None
-        self._client = self._build_client(will)
         self._dropped_logged = 0
         self.last_refusal: str | None = None  # the broker's reason for refusing the last CONNECT
+        self.last_error: str | None = None  # why the last connection attempt failed (TCP/TLS), if known
+        self._diagnosed = False
+        self._ssl: ssl.SSLContext | None = None
+        self._client = self._build_client(will)
 
     # -- set-up ---------------------------------------------------------------------------------
     def _build_client(self, will: tuple[str, bytes] | None) -> paho.Client:
@@ -116,13 +126,8 @@ class MqttBridge:
         if s.username is not None:
             client.username_pw_set(s.username, s.password.get_secret_value() if s.password else None)
         if s.tls:
-            client.tls_set(
-                ca_certs=str(s.ca_file) if s.ca_file else None,
-                certfile=str(s.cert_file) if s.cert_file else None,
-                keyfile=str(s.key_file) if s.key_file else None,
-                cert_reqs=ssl.CERT_REQUIRED,
-            )
-            client.tls_insecure_set(not s.tls_hostname_check)
+            self._ssl = self._ssl_context()
+            client.tls_set_context(self._ssl)
         if will is not None:
             client.will_set(will[0], will[1], qos=1, retain=False)
         client.max_queued_messages_set(10000)
@@ -134,6 +139,38 @@ class MqttBridge:
         client.on_subscribe = self._on_subscribe
         client.on_socket_open = self._on_socket_open
         return client
+
+    def _ssl_context(self) -> ssl.SSLContext:
+        """The broker's certificate is always verified (the system's CAs or ``ca_file``); the hostname
+        check can be turned off for brokers addressed by an IP their certificate does not name."""
+        s = self.settings
+        try:
+            ctx = ssl.create_default_context(cafile=str(s.ca_file) if s.ca_file else None)
+            if s.cert_file is not None:
+                ctx.load_cert_chain(str(s.cert_file), str(s.key_file) if s.key_file else None)
+        except (OSError, ssl.SSLError) as exc:
+            raise ValueError(f"broker TLS files: {exc}") from None
+        ctx.check_hostname = s.tls_hostname_check
+        return ctx
+
+    def _diagnose(self) -> None:
+        """paho reports a failed connect without its cause; find it with one probe (TCP, then TLS) and
+        log one clear line per streak of failures. Runs in its own short-lived thread."""
+        s = self.settings
+        try:
+            with socket.create_connection((s.host, s.port), timeout=3) as sock:
+                if self._ssl is not None:
+                    with self._ssl.wrap_socket(sock, server_hostname=s.host):
+                        pass
+            reason = "TCP/TLS works, but the MQTT connection failed"
+        except ssl.SSLCertVerificationError as exc:
+            reason = f"TLS: the broker's certificate was refused: {exc.verify_message}"
+        except ssl.SSLError as exc:
+            reason = f"TLS handshake failed: {exc.reason or exc}"
+        except OSError as exc:
+            reason = f"cannot connect: {exc.strerror or exc}"
+        self.last_error = reason
+        log.error("broker %s (%s): %s", self._where(), self._name, reason)
 
     def set_will(self, topic: str, payload: bytes) -> None:
         """The message the broker publishes if the gateway vanishes (must precede :meth:`start`)."""
@@ -182,6 +219,7 @@ class MqttBridge:
                 log.warning("offline message not delivered before shutdown")
         self._client.disconnect()
         self._client.loop_stop()
+        close_client(self._client)
 
     # -- paho callbacks (network thread) --------------------------------------------------------
     def _on_socket_open(self, client: paho.Client, userdata: Any, sock: Any) -> None:
@@ -199,6 +237,8 @@ class MqttBridge:
             self._schedule_retry()
             return
         self._backoff.reset()
+        self._diagnosed = False
+        self.last_error = None
         client.reconnect_delay_set(self.settings.reconnect_min, self.settings.reconnect_min)
         self._subscribed.clear()
         if self.subscriptions:
@@ -243,6 +283,9 @@ class MqttBridge:
 
     def _on_connect_fail(self, client: paho.Client, userdata: Any) -> None:
         self._metrics.inc("mqtt_connect_failures_total", link=self._name)
+        if not self._diagnosed:
+            self._diagnosed = True
+            threading.Thread(target=self._diagnose, name=f"mqtt-diagnose-{self._name}", daemon=True).start()
         self._schedule_retry()
 
     def _schedule_retry(self) -> None:

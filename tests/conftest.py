@@ -42,3 +42,14 @@ def private_broker() -> Iterator[LocalBroker]:
 def can_channel() -> str:
     """A fresh python-can virtual channel name, so tests never hear each other."""
     return f"djigw-test-{uuid.uuid4().hex[:8]}"
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    from tests import fuzz_stats
+
+    if fuzz_stats.CASES:
+        total = sum(fuzz_stats.CASES.values())
+        parts = ", ".join(f"{name} {n}" for name, n in sorted(fuzz_stats.CASES.items()))
+        failed = len(terminalreporter.stats.get("failed", []))
+        crashes = 0 if not failed else "see failures"
+        terminalreporter.write_line(f"fuzz: {total} cases ({parts}), {crashes} crashes")

@@ -21,6 +21,7 @@ from adapters.rsdk.can import HOST_TX_ID, Reassembler
 from adapters.rsdk.commands import decode_message
 from adapters.rsdk.protocol import Frame
 from gateway.app import GatewayApp
+from gateway.mqtt import close_client
 from gateway.settings import GatewaySettings, load_settings
 
 
@@ -49,6 +50,8 @@ class CloudClient:
         *,
         client_id: str | None = None,
         answer_events: bool = True,
+        username: str | None = None,
+        password: str | None = None,
     ) -> None:
         self.gateway_sn = gateway_sn
         self.answer_events = answer_events  # a real cloud answers events that carry need_reply
@@ -58,6 +61,8 @@ class CloudClient:
         self.client = paho.Client(
             CallbackAPIVersion.VERSION2, client_id=client_id or f"cloud-{uuid.uuid4().hex[:8]}"
         )
+        if username is not None:  # a broker with passwords and ACLs (the compose stack's mosquitto)
+            self.client.username_pw_set(username, password)
         self.client.on_message = self._on_message
         self._subscribed = threading.Event()
         self.client.on_subscribe = lambda *a: self._subscribed.set()
@@ -70,6 +75,7 @@ class CloudClient:
     def close(self) -> None:
         self.client.disconnect()
         self.client.loop_stop()
+        close_client(self.client)
 
     def _on_message(self, client: paho.Client, userdata: Any, msg: paho.MQTTMessage) -> None:
         try:
@@ -228,6 +234,8 @@ def gateway_settings(broker_port: int, devices: list[dict[str, Any]], **extra: A
         },
         "devices": devices,
         "osd_period": extra.pop("osd_period", 0.2),
+        # in-process gateways share a machine: no fixed metrics port unless a test asks for one
+        "metrics": {"enabled": False},
     }
     for key, value in extra.items():
         doc[key] = (

@@ -77,6 +77,7 @@ def test_broker_killed_and_restarted(private_broker: LocalBroker, can_channel: s
     settings = gateway_settings(private_broker.port, [device], dispatcher={"require_authority": False})
     with GatewayThread(settings) as gw:
         cloud = CloudClient(private_broker.host, private_broker.port, GW)
+        wait_until(lambda: gw.app.devices.by_sn("RSDK-T-2").online, 5, what="gimbal online")
         assert cloud.service("camera_photo_take", {"payload_index": "1001-0-0"})["data"]["result"] == 0
         cloud.close()
         private_broker.stop(kill=True)

@@ -70,6 +70,7 @@ class CanLink:
         self.frames_in = 0
         self.frames_out = 0
         self.send_errors = 0
+        self.opens = 0  # successful opens (the first one and every reopen), for the reconnect metric
 
     @property
     def up(self) -> bool:
@@ -89,6 +90,7 @@ class CanLink:
         self._sender = threading.Thread(target=self._send_loop, args=(bus, self._sendq), daemon=True)
         self._sender.start()
         self._up = True
+        self.opens += 1
         log.info("CAN link open: %s %s", self.interface, self.channel)
 
     def _make_bus(self) -> can.BusABC:

@@ -36,6 +36,7 @@ class DecoderStats:
     frames: int = 0
     bad_frames: int = 0
     dropped_bytes: int = 0
+    crc_errors: int = 0  # the part of bad_frames whose reason names a CRC (the rest: framing errors)
 
 
 class FrameRules(Protocol[F_co]):
@@ -111,6 +112,8 @@ class StreamDecoder(Generic[F]):
                 reason, start = bad
                 out.append(BadFrame(reason, bytes(buf[start:end])))
                 stats.bad_frames += 1
+                if "crc" in reason:
+                    stats.crc_errors += 1
                 stats.dropped_bytes += end - start
                 bad = None
             elif end > pos:

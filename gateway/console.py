@@ -1,0 +1,705 @@
+"""``dji-gateway send`` and ``dji-gateway monitor``: the cloud side of the Cloud API, for people.
+
+``send`` publishes one service (or one ``drc/down`` message) through the broker, waits for the reply
+that matches its ``tid`` and ``bid`` (``drc/up``: its method and ``seq``), prints it and exits 0 on
+result 0, 1 on an error result, 3 when nothing came back in time, 2 when the broker could not be used.
+``monitor`` subscribes to one gateway's topics and shows topology, osd, state, events, replies and the
+live-control (DRC) session: heartbeat round trip as seen on the broker, the last sticks, failsafes.
+It draws a ``rich`` view on a terminal and prints one line per message otherwise (``--plain``, or
+stdout not a TTY), so it works in pipes, logs and tests.
+
+Owns only the console: message shapes come from the Cloud API envelope (tid, bid, method, data), the
+broker link is a plain paho client. :class:`MonitorState` is pure (topic, payload, time in; lines
+out; :func:`render` draws it), so both modes show the same facts. Knows nothing of devices or bytes.
+Passwords are read from the environment (``DJIGW_CONSOLE_PASSWORD``), never from the command line,
+where ``ps`` would show them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import threading
+import time
+import uuid
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import paho.mqtt.client as paho
+    from rich.console import RenderableType
+
+__all__ = [
+    "DEFAULT_BROKER",
+    "MonitorState",
+    "add_parsers",
+    "build_message",
+    "cmd_monitor",
+    "cmd_send",
+    "parse_fields",
+    "render",
+]
+
+DEFAULT_BROKER = "mqtt://127.0.0.1:1883"
+BROKER_ENV = "DJIGW_CONSOLE_BROKER"
+USERNAME_ENV = "DJIGW_CONSOLE_USERNAME"
+PASSWORD_ENV = "DJIGW_CONSOLE_PASSWORD"
+GATEWAY_ENV = "DJIGW_GATEWAY_SN"
+
+EXIT_OK, EXIT_ERROR_RESULT, EXIT_USAGE, EXIT_TIMEOUT = 0, 1, 2, 3
+
+#: osd fields shown first (and always, when present) in a device's one-line summary.
+_OSD_FIRST = (
+    "gimbal_yaw", "gimbal_pitch", "gimbal_roll", "mode_code", "latitude", "longitude", "elevation", "height",
+    "attitude_head", "horizontal_speed", "vertical_speed", "drc_state", "x_robot_id", "x_hp", "x_position",
+)  # fmt: skip
+_DRC_PUSHES = frozenset({"osd_info_push", "hsi_info_push", "delay_info_push"})
+
+
+# ------------------------------------------------------------------------------------------ arguments
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    send = sub.add_parser(
+        "send",
+        help="publish one Cloud API service and print its reply",
+        description="Publish one service to thing/product/SN/services, wait for the services_reply with the "
+        "same tid and bid, print it. Exit 0 on result 0, 1 on an error result, 3 on timeout.",
+    )
+    send.add_argument("method", help="Cloud API method, e.g. camera_aim")
+    send.add_argument(
+        "fields",
+        nargs="*",
+        metavar="field=value",
+        help="data fields; values are JSON when they parse (0.5, true, {...}), text otherwise; a.b=1 nests",
+    )
+    send.add_argument("--data", help="the whole data object as JSON (field=value pairs are merged over it)")
+    send.add_argument(
+        "--drc",
+        action="store_true",
+        help="publish on drc/down instead (heart_beat, drone_control, drone_emergency_stop) and wait for "
+        "the drc/up answer with the same method and seq",
+    )
+    send.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the reply (10)")
+    send.add_argument("--tid", help="the request's tid (default: a fresh UUID)")
+    _connection_args(send)
+    send.set_defaults(handler=cmd_send, accepts_fields=True)
+
+    mon = sub.add_parser(
+        "monitor",
+        help="watch a gateway's topology, osd, state, events and DRC session live",
+        description="Subscribe to one gateway's topics and show them live: a rich view on a terminal, "
+        "one line per message otherwise.",
+    )
+    mon.add_argument("--plain", action="store_true", help="one line per message, even on a terminal")
+    mon.add_argument("--once", action="store_true", help="listen for --duration, draw the view once, exit")
+    mon.add_argument("--duration", type=float, help="stop after this many seconds (--once: default 3)")
+    mon.add_argument(
+        "--reply-events",
+        action="store_true",
+        help="answer events that ask for an events_reply (act as the cloud: no re-sends)",
+    )
+    mon.add_argument("--verbose", "-v", action="store_true", help="plain mode: also the DRC pushes")
+    _connection_args(mon)
+    mon.set_defaults(handler=cmd_monitor)
+
+
+def _connection_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--gateway-sn",
+        default=os.environ.get(GATEWAY_ENV),
+        help=f"the gateway's serial number (default ${GATEWAY_ENV})",
+    )
+    p.add_argument(
+        "--broker",
+        default=os.environ.get(BROKER_ENV, DEFAULT_BROKER),
+        help=f"mqtt://host:port, mqtts://, ws://, wss:// (default ${BROKER_ENV} or {DEFAULT_BROKER})",
+    )
+    p.add_argument(
+        "--username",
+        default=os.environ.get(USERNAME_ENV),
+        help=f"broker user (default ${USERNAME_ENV}); the password comes from ${PASSWORD_ENV}",
+    )
+    p.add_argument("--ca-file", help="CA certificate for mqtts:// and wss://")
+
+
+# ------------------------------------------------------------------------------------------ messages
+def parse_fields(pairs: list[str]) -> dict[str, Any]:
+    """``["x=0.5", "camera_type=wide", "a.b=1"]`` → ``{"x": 0.5, "camera_type": "wide", "a": {"b": 1}}``."""
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        key, sep, text = pair.partition("=")
+        if not sep or not key:
+            raise ValueError(f"expected field=value, got {pair!r}")
+        try:
+            value: Any = json.loads(text)
+        except ValueError:
+            value = text
+        node = out
+        *parents, leaf = key.split(".")
+        for name in parents:
+            child = node.setdefault(name, {})
+            if not isinstance(child, dict):
+                raise ValueError(f"{key}: {name} is already a value")
+            node = child
+        node[leaf] = value
+    return out
+
+
+def build_message(method: str, data: dict[str, Any], *, tid: str | None = None) -> dict[str, Any]:
+    """A services envelope: fresh tid and bid, the time in ms."""
+    return {
+        "tid": tid or str(uuid.uuid4()),
+        "bid": str(uuid.uuid4()),
+        "timestamp": int(time.time() * 1000),
+        "method": method,
+        "data": data,
+    }
+
+
+def _data_from(ns: argparse.Namespace) -> dict[str, Any]:
+    data: dict[str, Any] = {}
+    if ns.data:
+        loaded = json.loads(ns.data)
+        if not isinstance(loaded, dict):
+            raise ValueError("--data must be a JSON object")
+        data = loaded
+    return _merge(data, parse_fields(list(ns.fields or [])))
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+# ------------------------------------------------------------------------------------------ broker link
+class BrokerError(Exception):
+    """The broker could not be reached or refused us; the message says which."""
+
+
+class _Link:
+    """One paho client: connect, subscribe (waiting for SUBACK), hand messages to ``on_message``."""
+
+    def __init__(self, ns: argparse.Namespace, on_message: Callable[[str, bytes], None]) -> None:
+        import paho.mqtt.client as paho
+        from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
+        from pydantic import ValidationError
+
+        from gateway.settings import BrokerSettings
+
+        try:
+            self.settings = BrokerSettings(url=ns.broker)
+        except ValidationError as exc:
+            raise BrokerError(f"bad --broker {ns.broker!r}: {exc.errors()[0]['msg']}") from None
+        s = self.settings
+        self._on_message = on_message
+        self._connected = threading.Event()
+        self._subscribed = threading.Event()
+        self.refusal: str | None = None
+        self.client = paho.Client(
+            CallbackAPIVersion.VERSION2,
+            client_id=f"djigw-console-{uuid.uuid4().hex[:8]}",
+            protocol=MQTTProtocolVersion.MQTTv5,
+            transport=s.transport,
+        )
+        if s.transport == "websockets":
+            self.client.ws_set_options(path=s.ws_path)
+        if ns.username:
+            self.client.username_pw_set(ns.username, os.environ.get(PASSWORD_ENV))
+        if s.tls:
+            self.client.tls_set(ca_certs=ns.ca_file)
+        self.client.on_connect = self._connect_cb
+        self.client.on_message = lambda c, u, msg: self._on_message(msg.topic, bytes(msg.payload))
+        self.client.on_subscribe = lambda *a: self._subscribed.set()
+
+    def _connect_cb(self, client: paho.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
+        if reason.is_failure:
+            self.refusal = str(reason)
+        self._connected.set()
+
+    def open(self, topics: list[str], timeout: float = 5.0) -> _Link:
+        s = self.settings
+        try:
+            self.client.connect(s.host, s.port, keepalive=30)
+        except OSError as exc:
+            raise BrokerError(
+                f"cannot reach the broker at {s.host}:{s.port}: {exc.strerror or exc}"
+            ) from None
+        self.client.loop_start()
+        if not self._connected.wait(timeout):
+            self.close()
+            raise BrokerError(f"no answer from the broker at {s.host}:{s.port} within {timeout:g}s")
+        if self.refusal is not None:
+            self.close()
+            raise BrokerError(f"the broker at {s.host}:{s.port} refused the connection: {self.refusal}")
+        if topics:
+            self.client.subscribe([(t, 1) for t in topics])
+            if not self._subscribed.wait(timeout):
+                self.close()
+                raise BrokerError("the broker did not acknowledge the subscriptions")
+        return self
+
+    def publish(self, topic: str, body: dict[str, Any], qos: int = 1) -> None:
+        info = self.client.publish(topic, json.dumps(body, separators=(",", ":")), qos=qos)
+        if qos:
+            info.wait_for_publish(5)
+
+    def close(self) -> None:
+        self.client.disconnect()
+        self.client.loop_stop()
+
+
+# ------------------------------------------------------------------------------------------ send
+def cmd_send(ns: argparse.Namespace) -> int:
+    if not ns.gateway_sn:
+        print(f"dji-gateway send: --gateway-sn is required (or set ${GATEWAY_ENV})", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        data = _data_from(ns)
+    except ValueError as exc:
+        print(f"dji-gateway send: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    gw = ns.gateway_sn
+    if ns.drc:
+        body: dict[str, Any] = {"method": ns.method, "data": data}
+        seq = data.get("seq")
+        request_topic, reply_topic = f"thing/product/{gw}/drc/down", f"thing/product/{gw}/drc/up"
+
+        def matches(reply: dict[str, Any]) -> bool:
+            if reply.get("method") != ns.method:
+                return False
+            rdata = reply.get("data") or {}
+            got = rdata.get("seq", (rdata.get("output") or {}).get("seq", reply.get("seq")))
+            return seq is None or got == seq
+
+    else:
+        body = build_message(ns.method, data, tid=ns.tid)
+        request_topic, reply_topic = f"thing/product/{gw}/services", f"thing/product/{gw}/services_reply"
+
+        def matches(reply: dict[str, Any]) -> bool:
+            return reply.get("tid") == body["tid"] and reply.get("bid") == body["bid"]
+
+    found: list[dict[str, Any]] = []
+    arrived = threading.Event()
+
+    def on_message(topic: str, payload: bytes) -> None:
+        try:
+            reply = json.loads(payload)
+        except ValueError:
+            return
+        if isinstance(reply, dict) and matches(reply) and not arrived.is_set():
+            found.append(reply)
+            arrived.set()
+
+    try:
+        link = _Link(ns, on_message).open([reply_topic])
+    except BrokerError as exc:
+        print(f"dji-gateway send: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        link.publish(request_topic, body, qos=0 if ns.drc else 1)
+        if not arrived.wait(ns.timeout):
+            print(
+                f"dji-gateway send: no reply to {ns.method} from {gw} within {ns.timeout:g}s "
+                "(is the gateway running and connected to this broker?)",
+                file=sys.stderr,
+            )
+            return EXIT_TIMEOUT
+    finally:
+        link.close()
+    reply = found[0]
+    print(json.dumps(reply, indent=2, ensure_ascii=False))
+    result = (reply.get("data") or {}).get("result", 0)
+    if result:
+        from schemas.results import meaning
+
+        print(f"dji-gateway send: {ns.method} failed with {result}: {meaning(int(result))}", file=sys.stderr)
+        return EXIT_ERROR_RESULT
+    return EXIT_OK
+
+
+# ------------------------------------------------------------------------------------------ monitor state
+@dataclass
+class DeviceView:
+    sn: str
+    domain: str = "?"
+    online: bool = False
+    osd: dict[str, Any] = field(default_factory=dict)
+    osd_at: float | None = None
+    osd_count: int = 0
+    state: dict[str, Any] = field(default_factory=dict)
+    state_at: float | None = None
+
+
+@dataclass
+class DrcView:
+    state: int = 0
+    heartbeats: int = 0
+    pending_heartbeats: dict[Any, float] = field(default_factory=dict)  # seq -> when it went down
+    rtt_ms: float | None = None  # last heartbeat round trip as seen on this broker
+    rtt_avg_ms: float | None = None
+    heartbeat_at: float | None = None
+    stick: dict[str, Any] = field(default_factory=dict)  # the last drone_control data
+    stick_at: float | None = None
+    stick_result: int | None = None
+    failsafe: str | None = None  # the last failsafe reported (heartbeat lost, emergency stop, …)
+    failsafe_at: float | None = None
+    delay_ms: float | None = None  # the gateway's delay_info_push sdr_cmd_delay
+    push: dict[str, Any] = field(default_factory=dict)  # the last osd_info_push
+
+
+class MonitorState:
+    """What one gateway has said so far; :meth:`feed` returns the plain-mode lines for a message."""
+
+    def __init__(self, gateway_sn: str, *, verbose: bool = False, history: int = 12) -> None:
+        self.gateway_sn = gateway_sn
+        self.verbose = verbose
+        self.devices: dict[str, DeviceView] = {}
+        self.gateway_online: bool | None = None
+        self.topology_at: float | None = None
+        self.events: deque[tuple[float, str]] = deque(maxlen=history)
+        self.drc = DrcView()
+        self.messages = 0
+        self.last_at: float | None = None
+
+    def topics(self) -> list[str]:
+        gw = self.gateway_sn
+        return [
+            f"sys/product/{gw}/status",
+            f"thing/product/{gw}/events",
+            f"thing/product/{gw}/services",
+            f"thing/product/{gw}/services_reply",
+            f"thing/product/{gw}/drc/up",
+            f"thing/product/{gw}/drc/down",
+            f"thing/product/{gw}/requests",
+            "thing/product/+/osd",  # sub-devices publish under their own serial numbers
+            "thing/product/+/state",
+        ]
+
+    def feed(self, topic: str, payload: bytes, now: float) -> list[str]:
+        try:
+            body = json.loads(payload)
+        except ValueError:
+            return [f"{_clock()} ?      {topic}: not JSON ({len(payload)} bytes)"]
+        if not isinstance(body, dict):
+            return []
+        parts = topic.split("/")
+        if len(parts) < 4:
+            return []
+        sn, kind = parts[2], "/".join(parts[3:])
+        data = body.get("data") if isinstance(body.get("data"), dict) else {}
+        if kind in ("osd", "state") and not self._ours(sn, body):
+            return []
+        self.messages += 1
+        self.last_at = now
+        handler = getattr(self, "_" + kind.replace("/", "_"), None)
+        return handler(sn, body, data, now) if handler is not None else []
+
+    def _ours(self, sn: str, body: dict[str, Any]) -> bool:
+        return sn == self.gateway_sn or sn in self.devices or body.get("gateway") == self.gateway_sn
+
+    # -- per kind ---------------------------------------------------------------------------------
+    def _status(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
+        if body.get("method") != "update_topo":
+            return []
+        subs = data.get("sub_devices") or []
+        self.topology_at = now
+        self.gateway_online = True
+        listed = {d.get("sn") for d in subs}
+        for view in self.devices.values():
+            view.online = view.sn in listed
+        for d in subs:
+            view = self.devices.setdefault(str(d.get("sn")), DeviceView(str(d.get("sn"))))
+            view.domain, view.online = str(d.get("domain", "?")), True
+        names = " ".join(f"{d.get('sn')}(domain {d.get('domain')})" for d in subs) or "no devices online"
+        return [f"{_clock()} topo   {sn}: {names}"]
+
+    def _osd(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
+        if sn == self.gateway_sn:
+            if "drc_state" in data:
+                self.drc.state = int(data["drc_state"])
+            return [f"{_clock()} osd    {sn} drc_state={data.get('drc_state')}"] if self.verbose else []
+        view = self.devices.setdefault(sn, DeviceView(sn))
+        view.osd.update(data)
+        view.osd_at, view.osd_count = now, view.osd_count + 1
+        view.online = True  # only online devices publish osd (the topology may predate this monitor)
+        return [f"{_clock()} osd    {sn} {osd_summary(data)}"]
+
+    def _state(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
+        view = self.devices.setdefault(sn, DeviceView(sn))
+        view.state.update(data)
+        view.state_at = now
+        return [f"{_clock()} state  {sn} {_compact(data)}"]
+
+    def _events(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
+        method = str(body.get("method"))
+        text = f"{method} {_compact(data)}"
+        if method == "drc_status_notify":
+            self.drc.state = int(data.get("drc_state", self.drc.state))
+            result = int(data.get("result", 0) or 0)
+            if result:
+                self._failsafe(f"{result} {_meaning(result)}", now)
+        elif method == "joystick_invalid_notify":
+            self._failsafe(f"joystick invalid (reason {data.get('reason')})", now)
+        self.events.append((now, f"event {text}"))
+        return [f"{_clock()} event  {text}"]
+
+    def _services(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
+        text = f"{body.get('method')} {_compact(data)}"
+        self.events.append((now, f"→ {text}"))
+        return [f"{_clock()} call   {text} tid={body.get('tid')}"]
+
+    def _services_reply(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
+        result = data.get("result")
+        extra = f" {_compact(data['output'])}" if data.get("output") else ""
+        text = f"{body.get('method')} result={result}{extra}"
+        self.events.append((now, f"← {text}"))
+        return [f"{_clock()} reply  {text} tid={body.get('tid')}"]
+
+    def _requests(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
+        self.events.append((now, f"request {body.get('method')}"))
+        return [f"{_clock()} req    {body.get('method')} {_compact(data)}"]
+
+    def _drc_down(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
+        method = body.get("method")
+        seq = data.get("seq", body.get("seq"))
+        drc = self.drc
+        if method == "heart_beat":
+            drc.pending_heartbeats[seq] = now
+            while len(drc.pending_heartbeats) > 64:
+                drc.pending_heartbeats.pop(next(iter(drc.pending_heartbeats)))
+            return []
+        if method == "drone_control":
+            drc.stick, drc.stick_at = dict(data), now
+            return [f"{_clock()} drc    sticks {_compact(data)}"]
+        if method == "drone_emergency_stop":
+            self._failsafe("emergency stop requested", now)
+            return [f"{_clock()} drc    EMERGENCY STOP"]
+        return []
+
+    def _drc_up(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
+        method = body.get("method")
+        drc = self.drc
+        if method == "heart_beat":
+            seq = data.get("seq", body.get("seq"))
+            sent = drc.pending_heartbeats.pop(seq, None)
+            drc.heartbeats += 1
+            drc.heartbeat_at = now
+            if sent is None:
+                return [f"{_clock()} drc    heart_beat seq={seq}"]
+            rtt = (now - sent) * 1000.0
+            drc.rtt_ms = rtt
+            drc.rtt_avg_ms = rtt if drc.rtt_avg_ms is None else 0.8 * drc.rtt_avg_ms + 0.2 * rtt
+            return [f"{_clock()} drc    heart_beat seq={seq} rtt={rtt:.1f}ms"]
+        if method == "drone_control":
+            drc.stick_result = int(data.get("result", 0) or 0)
+            if drc.stick_result:
+                return [f"{_clock()} drc    sticks refused {_compact(data)}"]
+            return []
+        if method == "delay_info_push":
+            drc.delay_ms = data.get("sdr_cmd_delay")
+        elif method == "osd_info_push":
+            drc.push = dict(data)
+        if method in _DRC_PUSHES:
+            return [f"{_clock()} drc    {method} {_compact(data)}"] if self.verbose else []
+        return [f"{_clock()} drc    {method} {_compact(data)}"]
+
+    def _failsafe(self, text: str, now: float) -> None:
+        self.drc.failsafe, self.drc.failsafe_at = text, now
+
+
+def osd_summary(data: dict[str, Any], limit: int = 8) -> str:
+    """The scalar fields that say most about a device, ``name=value`` (angles to 0.1)."""
+    keys = [k for k in _OSD_FIRST if k in data] + sorted(k for k in data if k not in _OSD_FIRST)
+    shown = []
+    for key in keys:
+        value = data[key]
+        if isinstance(value, dict):
+            if set(value) <= {"x", "y"} and value:
+                shown.append(f"{key}=({_num(value.get('x'))},{_num(value.get('y'))})")
+            continue
+        if isinstance(value, list):
+            continue
+        shown.append(f"{key}={_num(value)}")
+        if len(shown) >= limit:
+            break
+    return " ".join(shown)
+
+
+def _num(value: Any) -> str:
+    """Floats without noise: 28.0 → 28, 0.1234567 → 0.123457, 22.54310012 → 22.5431."""
+    if isinstance(value, float):
+        return f"{value:.6f}".rstrip("0").rstrip(".") or "0"
+    return str(value)
+
+
+def _compact(data: Any, limit: int = 160) -> str:
+    text = json.dumps(data, separators=(",", ":"), ensure_ascii=False)
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+def _meaning(code: int) -> str:
+    from schemas.results import meaning
+
+    return meaning(code).rstrip(".")
+
+
+def _clock() -> str:
+    now = time.time()
+    return time.strftime("%H:%M:%S", time.localtime(now)) + f".{int(now * 1000) % 1000:03d}"
+
+
+# ------------------------------------------------------------------------------------------ rich view
+def _age(now: float, then: float | None) -> str:
+    return "—" if then is None else f"{max(0.0, now - then):.1f}s"
+
+
+def render(state: MonitorState, now: float, broker: str = "") -> RenderableType:
+    """The live view: devices (online, osd), the DRC session, the latest events and replies."""
+    from rich.console import Group
+    from rich.panel import Panel
+    from rich.table import Table
+
+    gw = state.gateway_sn
+    title = f"dji-gateway monitor · gateway {gw}" + (f" · {broker}" if broker else "")
+    if state.topology_at is not None:
+        head = f"topology {_age(now, state.topology_at)} ago · messages {state.messages}"
+    elif state.messages:
+        head = f"messages {state.messages} · no update_topo yet (sent on connect and when devices come or go)"
+    else:
+        head = "waiting for the gateway (is it running and connected to this broker?)"
+    devices = Table(title="devices", expand=True, title_justify="left")
+    for name in ("sn", "domain", "online", "osd age", "osd"):
+        devices.add_column(name, overflow="fold", ratio=4 if name == "osd" else None)
+    for view in state.devices.values():
+        devices.add_row(
+            view.sn,
+            view.domain if view.domain != "?" else "—",
+            "[green]online[/]" if view.online else "[red]offline[/]",
+            _age(now, view.osd_at),
+            osd_summary(view.osd, limit=10),
+        )
+    drc = state.drc
+    drc_table = Table.grid(padding=(0, 2))
+    drc_table.add_column(style="bold")
+    drc_table.add_column()
+    names = {0: "idle", 1: "connecting", 2: "in live control"}
+    drc_table.add_row("drc_state", f"{drc.state} ({names.get(drc.state, '?')})")
+    rtt = "—" if drc.rtt_ms is None else f"{drc.rtt_ms:.1f} ms (avg {drc.rtt_avg_ms:.1f} ms)"
+    drc_table.add_row(
+        "heartbeat", f"{drc.heartbeats} echoed, last {_age(now, drc.heartbeat_at)} ago, rtt {rtt}"
+    )
+    sticks = (
+        " ".join(f"{k}={_num(drc.stick[k])}" for k in ("seq", "x", "y", "h", "w") if k in drc.stick) or "—"
+    )
+    refused = f" (refused {drc.stick_result})" if drc.stick_result else ""
+    drc_table.add_row("sticks", f"{sticks}, {_age(now, drc.stick_at)} ago{refused}")
+    failsafe = "none" if drc.failsafe is None else f"[red]{drc.failsafe}[/] {_age(now, drc.failsafe_at)} ago"
+    drc_table.add_row("failsafe", failsafe)
+    if drc.delay_ms is not None:
+        drc_table.add_row("command delay", f"{drc.delay_ms} ms")
+    if drc.push:
+        drc_table.add_row("osd_info_push", osd_summary(drc.push, limit=8))
+    events = Table(title="events and replies", expand=True, title_justify="left", show_header=False)
+    events.add_column("age", width=7, no_wrap=True)
+    events.add_column("what", overflow="fold", ratio=1)
+    for at, text in list(state.events)[::-1]:
+        events.add_row(_age(now, at), text)
+    return Panel(
+        Group(head, devices, Panel(drc_table, title="live control (DRC)", title_align="left"), events),
+        title=title,
+        title_align="left",
+    )
+
+
+# ------------------------------------------------------------------------------------------ monitor
+def cmd_monitor(ns: argparse.Namespace) -> int:
+    if not ns.gateway_sn:
+        print(f"dji-gateway monitor: --gateway-sn is required (or set ${GATEWAY_ENV})", file=sys.stderr)
+        return EXIT_USAGE
+    state = MonitorState(ns.gateway_sn, verbose=ns.verbose)
+    plain = ns.plain or (not ns.once and not sys.stdout.isatty())
+    lock = threading.Lock()
+    link_box: list[_Link] = []
+
+    def on_message(topic: str, payload: bytes) -> None:
+        with lock:
+            lines = state.feed(topic, payload, time.monotonic())
+        if plain:
+            for line in lines:
+                print(line, flush=True)
+        if ns.reply_events and topic.endswith("/events") and link_box:
+            _answer_event(link_box[0], ns.gateway_sn, payload)
+
+    try:
+        link = _Link(ns, on_message)
+        link_box.append(link)
+        link.open(state.topics())
+    except BrokerError as exc:
+        print(f"dji-gateway monitor: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    duration = ns.duration if ns.duration is not None else (3.0 if ns.once else None)
+    deadline = None if duration is None else time.monotonic() + duration
+    try:
+        if ns.once:
+            _sleep_until(deadline)
+            from rich.console import Console
+
+            with lock:
+                Console(width=max(100, _terminal_width())).print(render(state, time.monotonic(), ns.broker))
+            return EXIT_OK if state.messages else EXIT_ERROR_RESULT
+        if plain:
+            print(f"monitoring gateway {ns.gateway_sn} on {ns.broker} (Ctrl-C stops)", flush=True)
+            _sleep_until(deadline)
+            return EXIT_OK
+        from rich.live import Live
+
+        with Live(render(state, time.monotonic(), ns.broker), refresh_per_second=4, screen=False) as live:
+            while deadline is None or time.monotonic() < deadline:
+                time.sleep(0.25)
+                with lock:
+                    live.update(render(state, time.monotonic(), ns.broker))
+        return EXIT_OK
+    except KeyboardInterrupt:
+        return EXIT_OK
+    finally:
+        link.close()
+
+
+def _answer_event(link: _Link, gateway_sn: str, payload: bytes) -> None:
+    try:
+        body = json.loads(payload)
+    except ValueError:
+        return
+    if not isinstance(body, dict) or body.get("need_reply") != 1:
+        return
+    reply = {
+        "tid": body.get("tid"),
+        "bid": body.get("bid"),
+        "timestamp": int(time.time() * 1000),
+        "method": body.get("method"),
+        "data": {"result": 0},
+    }
+    # from paho's thread: publish without waiting (waiting here would block the network loop)
+    link.client.publish(f"thing/product/{gateway_sn}/events_reply", json.dumps(reply), qos=1)
+
+
+def _sleep_until(deadline: float | None) -> None:
+    while deadline is None or time.monotonic() < deadline:
+        time.sleep(0.1 if deadline is None else max(0.0, min(0.1, deadline - time.monotonic())))
+        if deadline is not None and time.monotonic() >= deadline:
+            return
+
+
+def _terminal_width() -> int:
+    try:
+        return os.get_terminal_size().columns
+    except OSError:
+        return 120

@@ -1,0 +1,510 @@
+"""The gateway's HTTP window for operators: ``/metrics`` (Prometheus), ``/healthz`` and ``/status`` (JSON).
+
+Owns the translation of :class:`gateway.metrics.Metrics` (counters, gauges, histograms that every layer
+fills without knowing Prometheus) and of the live objects (devices, their links, the DRC session, the
+broker connection) into Prometheus families and one JSON document, and the small threaded HTTP server
+that serves them on ``metrics.host:metrics.port`` (127.0.0.1:9108 by default).
+
+Every request reads the gateway through one :meth:`Observability.snapshot`, taken **on the event loop**
+(with a deadline): a loop that cannot answer within :data:`LOOP_DEADLINE` makes ``/healthz`` fail, which
+is exactly what a container health check or a supervisor should notice. Link statistics are read from
+the links and stream decoders the adapters already keep (``frames_in``/``frames_out``, ``stats``), by
+duck typing in :func:`link_stats`; counters that restart with a new decoder are kept monotonic here.
+Never exposes a secret: the broker URL is reduced to scheme, host and port; settings are not served.
+Knows nothing of paho, bytes or Cloud API methods.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import contextlib
+import importlib.metadata
+import json
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any
+from urllib.parse import urlsplit
+
+from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
+from prometheus_client.core import (
+    CounterMetricFamily,
+    GaugeMetricFamily,
+    HistogramMetricFamily,
+    Metric,
+)
+from prometheus_client.registry import Collector
+
+log = logging.getLogger(__name__)
+
+__all__ = ["LOOP_DEADLINE", "PREFIX", "LinkStats", "Observability", "link_stats"]
+
+PREFIX = "djigw_"
+#: How long the event loop may take to hand over a snapshot before the gateway counts as unhealthy.
+LOOP_DEADLINE = 2.0
+
+#: HELP text of every metric the gateway counts today; a metric counted elsewhere but missing here is
+#: still exported (with a generic help), so a new counter never needs this table to be seen.
+HELP: dict[str, str] = {
+    "services_total": "Cloud API services answered, by method and result code",
+    "services_latency_seconds": "Time from a valid services request to its reply, by method",
+    "services_duplicates_total": "Services requests with an already seen tid (answered from the cache)",
+    "device_timeouts_total": "Device requests that missed their deadline (325004)",
+    "inbound_rejected_total": "Inbound MQTT messages refused before dispatch, by reason",
+    "handler_exceptions_total": "Unexpected exceptions caught (answered 599001 or logged), by where",
+    "mqtt_connects_total": "Successful broker connections (the first and every reconnect), by link",
+    "mqtt_disconnects_total": "Unexpected broker disconnections, by link",
+    "mqtt_connect_failures_total": "Broker connection attempts that failed, by link",
+    "mqtt_connect_refused_total": "Broker connections refused (bad credentials, not authorised), by link",
+    "mqtt_subscribe_refused_total": "Subscriptions the broker refused (ACL), by link",
+    "mqtt_messages_in_total": "MQTT messages received, by link",
+    "mqtt_messages_out_total": "MQTT messages published, by link",
+    "mqtt_publish_errors_total": "MQTT publishes paho could not queue, by link",
+    "mqtt_inbound_dropped_total": "Received messages dropped because the inbound queue was full, by link",
+    "mqtt_connected": "1 while connected to the broker, by link",
+    "osd_published_total": "osd messages published, by device",
+    "events_published_total": "events published, by method",
+    "events_resent_total": "events re-sent because no events_reply came",
+    "events_unanswered_total": "events given up after every re-send",
+    "outbound_invalid_total": "outbound bodies dropped because they broke the contract, by kind",
+    "topology_published_total": "update_topo messages published",
+    "drc_sessions_total": "Live flight control (DRC) sessions entered",
+    "drc_heartbeats_total": "DRC heart_beat messages echoed",
+    "drc_sticks_total": "DRC drone_control set-points accepted",
+    "drc_rejected_total": "DRC messages refused, by reason",
+    "drc_failsafe_stops_total": "Motion stopped by a DRC failsafe, by reason "
+    "(sticks, heartbeat, link_lost, emergency_stop)",
+}
+#: Per-link counters (``djigw_link_<name>_total{device, kind}``), read from the links and decoders.
+_LINK_COUNTERS = {
+    "opens": "Link opens: the first and every reconnect",
+    "frames_in": "Frames received (CAN frames on CAN links, protocol frames on serial links)",
+    "frames_out": "Frames sent (CAN frames, or frames written to the serial port)",
+    "bytes_in": "Bytes received (serial links)",
+    "bytes_out": "Bytes sent (serial links)",
+    "crc_errors": "Frames dropped for a bad CRC",
+    "framing_errors": "Drops that are not CRC failures: garbage, bad headers, truncated frames",
+    "send_errors": "Sends that failed and closed the link",
+}
+#: Unlabelled counters exported at 0 before they first count (dashboards and alerts need the series).
+_ZERO_COUNTERS = (
+    "services_duplicates_total",
+    "events_resent_total",
+    "events_unanswered_total",
+    "topology_published_total",
+    "drc_sessions_total",
+    "drc_heartbeats_total",
+    "drc_sticks_total",
+)
+#: Gauges the exporter computes from the live objects instead (the Metrics copy is event-driven only).
+_COMPUTED_GAUGES = frozenset({"device_online"})
+
+try:
+    VERSION = importlib.metadata.version("dji-gateway")
+except importlib.metadata.PackageNotFoundError:  # pragma: no cover - running from a bare checkout
+    VERSION = "0+unknown"
+
+
+# ------------------------------------------------------------------------------------------ link statistics
+@dataclass(frozen=True, slots=True)
+class LinkStats:
+    """One device link as an operator sees it (EMQX Neuron's per-link model: state, traffic, errors)."""
+
+    kind: str  # "can" or "serial"
+    where: str  # CAN channel or serial URL (never credentials: neither carries any)
+    up: bool
+    opens: int  # successful opens: the first and every reconnect
+    frames_in: int  # CAN frames on the device's id, or decoded protocol frames on a serial link
+    frames_out: int  # CAN frames sent, or frames written to the serial port
+    bytes_in: int | None
+    bytes_out: int | None
+    crc_errors: int
+    framing_errors: int  # bad frames that are not CRC failures: garbage, bad headers, truncation
+    send_errors: int
+
+
+def link_stats(adapter: Any) -> LinkStats | None:
+    """Read an adapter's link and stream decoder (``_link``; ``_rx.decoder`` or ``_decoder``).
+
+    Duck-typed on purpose: the adapters already keep these numbers, and an adapter without them
+    simply has no link metrics. Values may go backwards when an adapter replaces its decoder; the
+    exporter keeps the exported counters monotonic (:class:`_Monotonic`)."""
+    link = getattr(adapter, "_link", None)
+    if link is None:
+        return None
+    rx = getattr(adapter, "_rx", None)
+    decoder = getattr(rx, "decoder", None) if rx is not None else getattr(adapter, "_decoder", None)
+    stats = getattr(decoder, "stats", None)
+    bad = int(getattr(stats, "bad_frames", 0))
+    crc = int(getattr(stats, "crc_errors", 0))
+    serial = hasattr(link, "url")
+    return LinkStats(
+        kind="serial" if serial else "can",
+        where=str(getattr(link, "url", None) or getattr(link, "channel", "")),
+        up=bool(getattr(link, "up", False)),
+        opens=int(getattr(link, "opens", 0)),
+        frames_in=int(getattr(stats, "frames", 0)) if serial else int(getattr(link, "frames_in", 0)),
+        frames_out=int(getattr(link, "frames_out", 0)),
+        bytes_in=int(link.bytes_in) if hasattr(link, "bytes_in") else None,
+        bytes_out=int(link.bytes_out) if hasattr(link, "bytes_out") else None,
+        crc_errors=crc,
+        framing_errors=max(0, bad - crc),
+        send_errors=int(getattr(link, "send_errors", 0)),
+    )
+
+
+class _Monotonic:
+    """Keeps counters monotonic across sources that restart at zero (a decoder replaced on reopen)."""
+
+    def __init__(self) -> None:
+        self._seen: dict[tuple[str, str], tuple[float, float]] = {}  # key -> (base, last raw value)
+        self._lock = threading.Lock()
+
+    def __call__(self, device: str, name: str, raw: float) -> float:
+        with self._lock:
+            base, last = self._seen.get((device, name), (0.0, 0.0))
+            if raw < last:  # the source restarted: what it had counted stays counted
+                base += last
+            self._seen[(device, name)] = (base, raw)
+            return base + raw
+
+
+def _safe_url(url: str) -> str:
+    """scheme://host:port only: a URL may carry user:password@."""
+    parts = urlsplit(url)
+    host = parts.hostname or ""
+    try:
+        port = f":{parts.port}" if parts.port else ""
+    except ValueError:
+        port = ""
+    return f"{parts.scheme}://{host}{port}"
+
+
+# ------------------------------------------------------------------------------------------------ snapshot
+class Observability:
+    """Snapshots of one running :class:`gateway.app.GatewayApp`, as Prometheus families and JSON, and the
+    HTTP server that serves them. ``start()`` binds the port (failure is logged, never fatal: the
+    bridge matters more than its metrics); ``stop()`` closes it."""
+
+    def __init__(self, app: Any, loop: Any = None, *, clock: Callable[[], float] = time.monotonic) -> None:
+        self.app = app
+        self.loop = loop
+        self._clock = clock
+        self._started_at = clock()
+        self.loop_deadline = LOOP_DEADLINE
+        self._monotonic = _Monotonic()
+        self.registry = CollectorRegistry(auto_describe=False)
+        self.registry.register(_Collector(self))
+        self._server: ThreadingHTTPServer | None = None
+        self._thread: threading.Thread | None = None
+        self.port: int | None = None
+
+    # -- data -------------------------------------------------------------------------------------
+    def snapshot(self) -> dict[str, Any]:
+        """Everything /metrics and /status show, gathered on the event loop; ``loop_responsive`` is
+        False (and the data read from this thread instead) when the loop misses ``loop_deadline``."""
+        loop, deadline = self.loop, self.loop_deadline
+        if loop is not None and not loop.is_closed():
+            done: concurrent.futures.Future[dict[str, Any]] = concurrent.futures.Future()
+
+            def gather() -> None:
+                try:
+                    done.set_result(self._gather())
+                except BaseException as exc:  # handed to the waiting thread
+                    done.set_exception(exc)
+
+            try:
+                loop.call_soon_threadsafe(gather)
+                snap = done.result(deadline)
+                snap["loop_responsive"] = True
+                return snap
+            except (concurrent.futures.TimeoutError, RuntimeError):
+                pass
+        snap = self._gather()
+        snap["loop_responsive"] = loop is None
+        return snap
+
+    def _gather(self) -> dict[str, Any]:
+        app = self.app
+        metrics = app.metrics
+        bridge = getattr(app, "bridge", None)
+        dispatcher = getattr(app, "dispatcher", None)
+        auth = app.devices.authority
+        devices = []
+        for adapter in app.devices:
+            info = adapter.info
+            stats = link_stats(adapter)
+            link = None
+            if stats is not None:
+                link = asdict(stats)
+                for name in _LINK_COUNTERS:
+                    if link[name] is not None:
+                        link[name] = int(self._monotonic(info.sn, name, link[name]))
+            devices.append(
+                {
+                    "sn": info.sn,
+                    "type": str(getattr(getattr(adapter, "settings", None), "type", type(adapter).__name__)),
+                    "domain": info.domain,
+                    "payload_index": info.payload_index,
+                    "online": bool(adapter.online),
+                    "flight_authority": info.sn in auth.flight,
+                    "payload_authority": bool(info.payload_index and info.payload_index in auth.payloads),
+                    "link": link,
+                }
+            )
+        return {
+            "gateway_sn": app.settings.gateway_sn,
+            "version": VERSION,
+            "uptime_s": round(self._clock() - self._started_at, 3),
+            "started": bool(getattr(app, "started", None) and app.started.is_set()),
+            "broker": {
+                "url": _safe_url(app.settings.broker.url),
+                "connected": bool(bridge is not None and bridge.connected),
+                "subscribed": bool(bridge is not None and bridge.subscribed),
+                "inbound_queue": bridge.queue.qsize() if bridge is not None else 0,
+            },
+            "requests_in_flight": int(getattr(dispatcher, "in_flight", 0)) if dispatcher is not None else 0,
+            "devices": devices,
+            "drc": self._drc(),
+            "counters": [(n, dict(lab), v) for (n, lab), v in list(metrics.counters.items())],
+            "gauges": [(n, dict(lab), v) for (n, lab), v in list(metrics.gauges.items())],
+            "histograms": [
+                (n, dict(lab), h.bounds, list(h.counts), h.total, h.count)
+                for (n, lab), h in list(metrics.histograms.items())
+            ],
+        }
+
+    def _drc(self) -> dict[str, Any]:
+        drc = getattr(self.app, "drc", None)
+        if drc is None:
+            return {"state": 0, "active": False}
+        now = drc.now()
+
+        def age(t: float) -> float | None:
+            return round(now - t, 3) if t != float("-inf") else None
+
+        forward, right, up, yaw = drc.setpoint
+        return {
+            "state": int(drc.drc_state),
+            "active": bool(drc.active),
+            "broker": "dedicated" if getattr(drc, "_bridge", None) is not None else "main",
+            "last_seq": drc.last_seq,
+            "heartbeat_age_s": age(drc.last_heartbeat) if drc.active else None,
+            "stick_age_s": age(drc.last_stick) if drc.active else None,
+            "setpoint": {"forward": forward, "right": right, "up": up, "yaw_rate": yaw},
+            "emergency_stop": bool(drc.estop),
+            "stopped_for_heartbeat": bool(drc.stopped_for_heartbeat),
+            "command_delay_ms": round(float(drc.cmd_delay_ms), 1),
+        }
+
+    # -- views ------------------------------------------------------------------------------------
+    def status(self, snap: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The ``/status`` document: live state plus counter totals (no label detail, no settings)."""
+        snap = snap or self.snapshot()
+        totals: dict[str, float] = {}
+        for name, _labels, value in snap["counters"]:
+            totals[name] = totals.get(name, 0.0) + value
+        results: dict[str, float] = {}
+        for name, labels, value in snap["counters"]:
+            if name == "services_total":
+                results[str(labels.get("result"))] = results.get(str(labels.get("result")), 0.0) + value
+        health, checks = self.health(snap)
+        return {
+            "gateway_sn": snap["gateway_sn"],
+            "version": snap["version"],
+            "healthy": health,
+            "checks": checks,
+            "uptime_s": snap["uptime_s"],
+            "broker": snap["broker"],
+            "requests_in_flight": snap["requests_in_flight"],
+            "services_by_result": results,
+            "devices": snap["devices"],
+            "drc": snap["drc"],
+            "counters": dict(sorted(totals.items())),
+        }
+
+    @staticmethod
+    def health(snap: dict[str, Any]) -> tuple[bool, dict[str, bool]]:
+        """Healthy: started, the loop answers, the broker connection is up. Offline devices do not
+        count (absent hardware is not a fault of the gateway; restarting it would not help)."""
+        checks = {
+            "started": bool(snap["started"]),
+            "event_loop": bool(snap["loop_responsive"]),
+            "broker": bool(snap["broker"]["connected"]),
+        }
+        return all(checks.values()), checks
+
+    def families(self, snap: dict[str, Any] | None = None) -> Iterator[Metric]:
+        snap = snap or self.snapshot()
+        yield from _families(snap)
+
+    # -- HTTP ---------------------------------------------------------------------------------------
+    def start(self, host: str, port: int) -> Observability | None:
+        handler = _handler_for(self)
+        try:
+            server = ThreadingHTTPServer((host, port), handler)
+        except OSError as exc:
+            log.warning("metrics endpoint disabled: cannot listen on %s:%d (%s)", host, port, exc.strerror)
+            return None
+        server.daemon_threads = True
+        self._server = server
+        self.port = int(server.server_address[1])
+        self._thread = threading.Thread(target=server.serve_forever, name="observability", daemon=True)
+        self._thread.start()
+        log.info("metrics on http://%s:%d/metrics (also /healthz, /status)", host, self.port)
+        return self
+
+    def stop(self) -> None:
+        server, self._server = self._server, None
+        if server is not None:
+            server.shutdown()
+            server.server_close()
+        if self._thread is not None:
+            self._thread.join(2.0)
+            self._thread = None
+
+
+class _Collector(Collector):
+    def __init__(self, owner: Observability) -> None:
+        self.owner = owner
+
+    def collect(self) -> Iterator[Metric]:
+        return self.owner.families()
+
+
+def _families(snap: dict[str, Any]) -> Iterator[Metric]:
+    p = PREFIX
+    info = GaugeMetricFamily(f"{p}info", "dji-gateway build and identity", labels=["gateway_sn", "version"])
+    info.add_metric([snap["gateway_sn"], snap["version"]], 1)
+    yield info
+    healthy, _ = Observability.health(snap)
+    yield GaugeMetricFamily(f"{p}healthy", "1 when /healthz passes", value=1 if healthy else 0)
+    yield GaugeMetricFamily(
+        f"{p}event_loop_responsive", "1 when the event loop answered the scrape in time",
+        value=1 if snap["loop_responsive"] else 0,
+    )  # fmt: skip
+    yield GaugeMetricFamily(f"{p}uptime_seconds", "Seconds since the gateway started", value=snap["uptime_s"])
+    yield GaugeMetricFamily(
+        f"{p}requests_in_flight", "Services being executed now", value=snap["requests_in_flight"]
+    )
+    yield GaugeMetricFamily(
+        f"{p}mqtt_inbound_queue_depth", "Received messages waiting for the dispatcher",
+        value=snap["broker"]["inbound_queue"],
+    )  # fmt: skip
+
+    # -- counters, gauges and histograms the layers count themselves ------------------------------
+    counters: dict[str, list[tuple[dict[str, str], float]]] = {name: [] for name in _ZERO_COUNTERS}
+    for name, labels, value in snap["counters"]:
+        counters.setdefault(name, []).append((labels, value))
+    for name in HELP:
+        if name.endswith("_total"):
+            counters.setdefault(name, [])
+    for name, series in sorted(counters.items()):
+        keys = sorted({k for labels, _ in series for k in labels})
+        family = CounterMetricFamily(
+            p + name.removesuffix("_total"), HELP.get(name, name.replace("_", " ")), labels=keys
+        )
+        if not series and not keys:
+            family.add_metric([], 0)
+        for labels, value in series:
+            family.add_metric([labels.get(k, "") for k in keys], value)
+        yield family
+
+    gauges: dict[str, list[tuple[dict[str, str], float]]] = {}
+    for name, labels, value in snap["gauges"]:
+        if name not in _COMPUTED_GAUGES:
+            gauges.setdefault(name, []).append((labels, value))
+    for name, series in sorted(gauges.items()):
+        keys = sorted({k for labels, _ in series for k in labels})
+        family = GaugeMetricFamily(p + name, HELP.get(name, name.replace("_", " ")), labels=keys)
+        for labels, value in series:
+            family.add_metric([labels.get(k, "") for k in keys], value)
+        yield family
+
+    histograms: dict[str, list[tuple[dict[str, str], Any, list[int], float]]] = {
+        "services_latency_seconds": []
+    }
+    for name, labels, bounds, counts, total, _count in snap["histograms"]:
+        histograms.setdefault(name, []).append((labels, bounds, counts, total))
+    for name, series in sorted(histograms.items()):
+        keys = sorted({k for labels, *_ in series for k in labels})
+        family = HistogramMetricFamily(p + name, HELP.get(name, name.replace("_", " ")), labels=keys)
+        for labels, bounds, counts, total in series:
+            if not counts:
+                continue
+            buckets = [(repr(float(b)), counts[i]) for i, b in enumerate(bounds)] + [("+Inf", counts[-1])]
+            family.add_metric([labels.get(k, "") for k in keys], buckets, total)
+        yield family
+
+    # -- devices and their links (read live, per scrape) --------------------------------------------
+    online = GaugeMetricFamily(f"{p}device_online", "1 while the device is online", labels=["device", "type"])
+    link_up = GaugeMetricFamily(f"{p}link_up", "1 while the device link is open", labels=["device", "kind"])
+    per_link = {
+        name: CounterMetricFamily(f"{p}link_{name}", text, labels=["device", "kind"])
+        for name, text in _LINK_COUNTERS.items()
+    }
+    for device in snap["devices"]:
+        online.add_metric([device["sn"], device["type"]], 1 if device["online"] else 0)
+        link = device["link"]
+        if link is None:
+            continue
+        labels = [device["sn"], link["kind"]]
+        link_up.add_metric(labels, 1 if link["up"] else 0)
+        for name, family in per_link.items():
+            if link[name] is not None:
+                family.add_metric(labels, link[name])
+    yield online
+    yield link_up
+    yield from per_link.values()
+
+    drc = snap["drc"]
+    yield GaugeMetricFamily(f"{p}drc_state", "drc_state: 0 idle, 1 connecting, 2 in live control",
+                            value=drc["state"])  # fmt: skip
+    heartbeat_age = drc.get("heartbeat_age_s")
+    yield GaugeMetricFamily(
+        f"{p}drc_heartbeat_age_seconds", "Seconds since the last DRC heart_beat (0 outside a session)",
+        value=heartbeat_age if heartbeat_age is not None else 0,
+    )  # fmt: skip
+    yield GaugeMetricFamily(
+        f"{p}drc_command_delay_seconds", "Smoothed delay from a stick message to the device stream",
+        value=drc.get("command_delay_ms", 0.0) / 1000.0,
+    )  # fmt: skip
+
+
+def _handler_for(obs: Observability) -> type[BaseHTTPRequestHandler]:
+    class Handler(BaseHTTPRequestHandler):
+        server_version = f"dji-gateway/{VERSION}"
+
+        def do_GET(self) -> None:  # the http.server interface
+            path = self.path.split("?", 1)[0].rstrip("/") or "/"
+            try:
+                if path == "/metrics":
+                    self._send(200, CONTENT_TYPE_LATEST, generate_latest(obs.registry))
+                elif path == "/healthz":
+                    snap = obs.snapshot()
+                    healthy, checks = obs.health(snap)
+                    body = {"status": "ok" if healthy else "unhealthy", "checks": checks}
+                    self._send(200 if healthy else 503, "application/json", json.dumps(body).encode())
+                elif path == "/status":
+                    self._send(200, "application/json", json.dumps(obs.status()).encode())
+                else:
+                    self._send(404, "text/plain", b"try /metrics, /healthz or /status\n")
+            except Exception:  # never let a bug here take the server thread down
+                log.exception("observability request %s failed", path)
+                with contextlib.suppress(Exception):
+                    self._send(500, "text/plain", b"internal error\n")
+
+        def _send(self, code: int, content_type: str, body: bytes) -> None:
+            self.send_response(code)
+            self.send_header("Content-Type", content_type)
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, format: str, *args: Any) -> None:
+            log.debug("http %s", format % args)
+
+    return Handler

@@ -1,0 +1,340 @@
+"""The cloud console: ``dji-gateway send`` publishes a service through a real mosquitto, matches the reply
+by tid and bid and maps it to an exit code; ``dji-gateway monitor`` shows a live gateway (plain lines and
+the rich view, including the DRC session) and can answer events as the cloud would."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from rich.console import Console
+
+from adapters.rsdk.sim import GimbalCanSim
+from gateway.cli import main
+from gateway.console import MonitorState, build_message, parse_fields, render
+from gateway.local_broker import LocalBroker, free_port
+from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
+
+GW = "GW-CON-1"
+SN = "RSDK-CON-1"
+PI = "1001-0-0"
+
+
+# ------------------------------------------------------------------------------------------ pure parts
+def test_field_values_are_json_when_they_parse_and_dots_nest() -> None:
+    assert parse_fields(["x=0.9", "locked=false", "camera_type=wide", "payload_index=1001-0-0"]) == {
+        "x": 0.9,
+        "locked": False,
+        "camera_type": "wide",
+        "payload_index": "1001-0-0",
+    }
+    assert parse_fields(
+        ["mqtt_broker.address=127.0.0.1:1883", "mqtt_broker.enable_tls=false", 'sn="123"']
+    ) == {
+        "mqtt_broker": {"address": "127.0.0.1:1883", "enable_tls": False},
+        "sn": "123",
+    }
+    with pytest.raises(ValueError, match="field=value"):
+        parse_fields(["oops"])
+    with pytest.raises(ValueError, match="already a value"):
+        parse_fields(["a=1", "a.b=2"])
+
+
+def test_a_message_has_fresh_ids() -> None:
+    a, b = build_message("camera_aim", {"x": 1}), build_message("camera_aim", {"x": 1})
+    assert a["tid"] != b["tid"] and a["bid"] != b["bid"] and a["data"] == {"x": 1}
+    assert build_message("m", {}, tid="t-7")["tid"] == "t-7"
+
+
+def _feed(state: MonitorState, topic: str, body: dict[str, Any], now: float) -> list[str]:
+    return state.feed(topic, json.dumps(body).encode(), now)
+
+
+def test_the_monitor_state_follows_topology_osd_events_and_the_drc_session() -> None:
+    st = MonitorState(GW)
+    topo = {"method": "update_topo", "data": {"sub_devices": [{"sn": SN, "domain": "1"}]}}
+    assert "RSDK-CON-1(domain 1)" in _feed(st, f"sys/product/{GW}/status", topo, 1.0)[0]
+    (line,) = _feed(
+        st, f"thing/product/{SN}/osd", {"gateway": GW, "data": {"gimbal_yaw": 28.0, "cameras": []}}, 1.1
+    )
+    assert line.endswith(f"osd    {SN} gimbal_yaw=28")
+    assert _feed(st, "thing/product/OTHER-1/osd", {"gateway": "GW-OTHER", "data": {"x": 1}}, 1.2) == []
+    # DRC: heartbeat round trip as seen on the broker, sticks, a failsafe
+    _feed(
+        st, f"thing/product/{GW}/drc/down", {"method": "heart_beat", "data": {"seq": 4, "timestamp": 1}}, 2.0
+    )
+    (hb,) = _feed(
+        st, f"thing/product/{GW}/drc/up", {"method": "heart_beat", "data": {"seq": 4, "timestamp": 1}}, 2.004
+    )
+    assert "rtt=4.0ms" in hb and st.drc.rtt_ms == pytest.approx(4.0)
+    _feed(st, f"thing/product/{GW}/drc/down", {"method": "drone_control", "data": {"seq": 9, "y": 1.5}}, 2.1)
+    _feed(st, f"thing/product/{GW}/osd", {"data": {"drc_state": 2}}, 2.2)
+    notify = {"method": "drc_status_notify", "need_reply": 1, "data": {"result": 514301, "drc_state": 2}}
+    _feed(st, f"thing/product/{GW}/events", notify, 2.3)
+    assert st.drc.failsafe is not None and st.drc.failsafe.startswith("514301")
+    # and the device going away
+    _feed(st, f"sys/product/{GW}/status", {"method": "update_topo", "data": {"sub_devices": []}}, 3.0)
+    assert not st.devices[SN].online
+
+    console = Console(record=True, width=140, color_system=None)
+    console.print(render(st, 3.5, "mqtt://127.0.0.1:1883"))
+    view = console.export_text()
+    for expected in (
+        GW,
+        SN,
+        "offline",
+        "gimbal_yaw=28",
+        "2 (in live control)",
+        "rtt 4.0 ms",
+        "seq=9",
+        "y=1.5",
+        "514301 DRC link: heartbeat timed out",
+        "drc_status_notify",
+    ):
+        assert expected in view, (expected, view)
+
+
+def test_garbage_on_a_topic_is_shown_not_fatal() -> None:
+    st = MonitorState(GW)
+    assert "not JSON" in st.feed(f"thing/product/{GW}/events", b"\xff\x00", 0.0)[0]
+    assert st.feed(f"thing/product/{GW}/events", b"[1, 2]", 0.0) == []
+
+
+# ------------------------------------------------------------------------------------------ against mosquitto
+@pytest.fixture
+def rig(broker: LocalBroker, can_channel: str) -> Iterator[dict[str, Any]]:
+    sim = GimbalCanSim(interface="virtual", channel=can_channel).start()
+    device = {"type": "rsdk", "sn": SN, "interface": "virtual", "channel": can_channel, "drc_drive": True}
+    settings = gateway_settings(
+        broker.port,
+        [device],
+        gateway_sn=GW,
+        metrics={"enabled": False},
+        dispatcher={"event_retry_interval": 0.3},
+    )
+    cloud = CloudClient(broker.host, broker.port, GW, answer_events=False)
+    gw = GatewayThread(settings).start()
+    try:
+        wait_until(lambda: gw.app.devices.by_sn(SN).online, 5, what="gimbal online")
+        yield {"gw": gw, "sim": sim, "cloud": cloud, "url": broker.url}
+    finally:
+        gw.stop()
+        cloud.close()
+        sim.stop()
+
+
+def _send(capsys: pytest.CaptureFixture[str], url: str, *args: str) -> tuple[int, str, str]:
+    code = main(["send", *args, "--gateway-sn", GW, "--broker", url])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.mark.broker
+def test_send_prints_the_matching_reply_and_maps_the_result_to_the_exit_code(
+    rig: dict[str, Any], capsys: pytest.CaptureFixture[str]
+) -> None:
+    url, sim, cloud = rig["url"], rig["sim"], rig["cloud"]
+    code, out, _ = _send(capsys, url, "payload_authority_grab", f"payload_index={PI}")
+    assert code == 0 and json.loads(out)["data"] == {"result": 0}
+    # fields after an option still count; the reply carries our tid
+    code, out, _ = _send(
+        capsys,
+        url,
+        "camera_aim",
+        "--tid",
+        "aim-1",
+        f"payload_index={PI}",
+        "camera_type=wide",
+        "locked=false",
+        "x=0.9",
+        "y=0.5",
+    )
+    reply = json.loads(out)
+    assert code == 0 and reply["tid"] == "aim-1" and reply["method"] == "camera_aim"
+    wait_until(lambda: abs(sim.model.yaw.angle - 28.0) < 0.5, 3, what="the gimbal turned to 28°")
+    request = cloud.wait_for("/services", lambda b: b["tid"] == "aim-1")[0]
+    assert request["bid"] == reply["bid"]
+    # --data, merged with field=value; an error result exits 1 and says why on stderr
+    code, out, err = _send(
+        capsys,
+        url,
+        "camera_aim",
+        "--data",
+        json.dumps({"camera_type": "wide", "locked": False, "x": 0.5, "y": 0.5}),
+        "payload_index=9-9-9",
+    )
+    assert code == 1 and json.loads(out)["data"]["result"] == 325001 and "325001" in err
+    # nobody answers for this gateway: exit 3 after the timeout
+    code = main(
+        ["send", "camera_photo_take", "--gateway-sn", "GW-NOBODY", "--broker", url, "--timeout", "0.3"]
+    )
+    assert code == 3 and "no reply" in capsys.readouterr().err
+    # no broker there: exit 2
+    code = main(
+        ["send", "camera_photo_take", "--gateway-sn", GW, "--broker", f"mqtt://127.0.0.1:{free_port()}"]
+    )
+    assert code == 2 and "cannot reach the broker" in capsys.readouterr().err
+    assert main(["send", "x", "--broker", url]) == 2  # no --gateway-sn
+
+
+@pytest.mark.broker
+def test_send_drives_a_drc_session(rig: dict[str, Any], capsys: pytest.CaptureFixture[str]) -> None:
+    url, sim = rig["url"], rig["sim"]
+    assert _send(capsys, url, "payload_authority_grab", f"payload_index={PI}")[0] == 0
+    host_port = url.split("://", 1)[1]
+    enter = [
+        f"mqtt_broker.address={host_port}",
+        "mqtt_broker.client_id=drc-console",
+        "mqtt_broker.username=u",
+        "mqtt_broker.password=unused",
+        "mqtt_broker.enable_tls=false",
+        "mqtt_broker.expire_time=4102444800",
+        "osd_frequency=5",
+        "hsi_frequency=1",
+    ]
+    assert _send(capsys, url, "drc_mode_enter", *enter)[0] == 0
+    code, out, _ = _send(capsys, url, "--drc", "heart_beat", "seq=7", "timestamp=1700000000000")
+    assert code == 0 and json.loads(out)["data"] == {"seq": 7, "timestamp": 1700000000000}
+    code, out, _ = _send(capsys, url, "--drc", "drone_control", "seq=1", "w=20")
+    assert code == 0 and json.loads(out)["data"] == {"result": 0, "output": {"seq": 1}}
+    wait_until(lambda: sim.model.yaw.speed == 20.0, 3, what="sticks turn the gimbal")
+    assert _send(capsys, url, "--drc", "drone_control", "seq=2", "w=5")[0] == 0
+    code, out, _ = _send(capsys, url, "--drc", "drone_control", "seq=2", "w=6", "--timeout", "0.3")
+    assert code == 3  # a repeated seq is ignored by the gateway (clouds repeat DRC messages): no answer
+    assert _send(capsys, url, "drc_mode_exit")[0] == 0
+
+
+def _spawn_monitor(url: str, *args: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "gateway.cli", "monitor", "--gateway-sn", GW, "--broker", url, *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+
+
+def _lines(proc: subprocess.Popen[str]) -> list[str]:
+    lines: list[str] = []
+
+    def read() -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.append(line.rstrip("\n"))
+
+    threading.Thread(target=read, daemon=True).start()
+    return lines
+
+
+@pytest.mark.broker
+def test_monitor_lines_show_the_gimbal_moving_and_it_answers_events(
+    rig: dict[str, Any], capsys: pytest.CaptureFixture[str]
+) -> None:
+    url, gw, cloud = rig["url"], rig["gw"], rig["cloud"]
+    proc = _spawn_monitor(url, "--duration", "30", "--reply-events")  # stdout is a pipe: plain lines
+    lines = _lines(proc)
+    try:
+        wait_until(lambda: any("monitoring gateway" in ln for ln in lines), 10, what="monitor subscribed")
+        yaw = re.compile(rf"osd    {SN} gimbal_yaw=(-?[\d.]+)")
+
+        def yaws() -> list[float]:
+            return [float(m.group(1)) for ln in list(lines) if (m := yaw.search(ln))]
+
+        wait_until(yaws, 5, what="gimbal osd in the monitor")
+        assert _send(capsys, url, "payload_authority_grab", f"payload_index={PI}")[0] == 0
+        assert (
+            _send(
+                capsys,
+                url,
+                "x_rsdk_position_set",
+                f"payload_index={PI}",
+                "yaw=-40",
+                "roll=0",
+                "pitch=10",
+                "duration=0.2",
+            )[0]
+            == 0
+        )
+        wait_until(lambda: any(abs(v + 40) < 0.5 for v in yaws()), 5, what="the monitor shows yaw -40")
+        assert any("reply  x_rsdk_position_set result=0" in ln for ln in lines), lines
+
+        # an event that wants a reply: the monitor answers it like a cloud, so the gateway stops re-sending
+        host_port = url.split("://", 1)[1]
+        enter = {
+            "mqtt_broker": {
+                "address": host_port,
+                "client_id": "c",
+                "username": "u",
+                "password": "p",
+                "enable_tls": False,
+                "expire_time": 4102444800,
+            },
+            "osd_frequency": 5,
+            "hsi_frequency": 1,
+        }
+        assert cloud.service("drc_mode_enter", enter)["data"]["result"] == 0
+        notify = cloud.wait_for("/events", lambda b: b["method"] == "drc_status_notify")[0]
+        cloud.wait_for("/events_reply", lambda b: b["tid"] == notify["tid"] and b["data"] == {"result": 0})
+        wait_until(lambda: not gw.app.northbound._events, 3, what="the gateway saw the events_reply")
+        assert any("event  drc_status_notify" in ln for ln in lines)
+    finally:
+        proc.terminate()
+        proc.wait(5)
+        if proc.stdout:
+            proc.stdout.close()
+
+
+@pytest.mark.broker
+def test_monitor_once_draws_the_rich_view(rig: dict[str, Any]) -> None:
+    url = rig["url"]
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "gateway.cli",
+            "monitor",
+            "--gateway-sn",
+            GW,
+            "--broker",
+            url,
+            "--once",
+            "--duration",
+            "2.5",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert proc.returncode == 0, proc.stderr
+    for expected in ("dji-gateway monitor", SN, "gimbal_yaw=", "live control (DRC)", "drc_state"):
+        assert expected in proc.stdout, proc.stdout
+    # a gateway that is not there: the view says so, and the exit code is 1
+    empty = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "gateway.cli",
+            "monitor",
+            "--gateway-sn",
+            "GW-NOBODY",
+            "--broker",
+            url,
+            "--once",
+            "--duration",
+            "0.5",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert empty.returncode == 1 and "waiting for the gateway" in empty.stdout
+
+
+def test_monitor_without_a_broker_fails_cleanly(capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["monitor", "--gateway-sn", GW, "--broker", f"mqtt://127.0.0.1:{free_port()}", "--plain"])
+    assert code == 2 and "cannot reach the broker" in capsys.readouterr().err
