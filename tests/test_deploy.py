@@ -361,13 +361,28 @@ def test_the_compose_topology_runs_as_plain_processes(
     probe, outcome = _login(stack["broker_port"], GW, GATEWAY_PW)
     assert probe is not None, outcome
     try:
-        probe.publish("thing/product/INTRUDER-1/osd", '{"data":{}}', qos=1).wait_for_publish(5)
-        probe.publish("thing/product/RS-0001/x_acl_probe", '{"data":{}}', qos=1).wait_for_publish(5)
-        cloud.wait_for("RS-0001/x_acl_probe")  # published after the refused one, on the same connection
+        probe.publish("thing/product/INTRUDER-1/osd", '{"data":{"acl":1}}', qos=1).wait_for_publish(5)
+        probe.publish(f"thing/product/{GW}/services", '{"data":{"acl":1}}', qos=1).wait_for_publish(5)
+        probe.publish("thing/product/RS-0001/state", '{"data":{"acl":1}}', qos=1).wait_for_publish(5)
+        cloud.wait_for("RS-0001/state", lambda b: b["data"] == {"acl": 1})  # after the refused ones
         assert not cloud.find("INTRUDER-1/osd")
+        assert not cloud.find(f"{GW}/services", lambda b: b["data"] == {"acl": 1})  # no forged commands
     finally:
         probe.disconnect()
         probe.loop_stop()
+    # ... and the cloud's user may send commands, never a gateway's replies or telemetry
+    forger, outcome = _login(stack["broker_port"], "cloud", CLOUD_PW)
+    assert forger is not None, outcome
+    try:
+        forger.publish(f"thing/product/{GW}/services_reply", '{"data":{"acl":2}}', qos=1).wait_for_publish(5)
+        forger.publish("thing/product/RS-0001/osd", '{"data":{"acl":2}}', qos=1).wait_for_publish(5)
+        forger.publish(f"thing/product/{GW}/events_reply", '{"data":{"acl":2}}', qos=1).wait_for_publish(5)
+        cloud.wait_for(f"{GW}/events_reply", lambda b: b["data"] == {"acl": 2})
+        assert not cloud.find(f"{GW}/services_reply", lambda b: b["data"] == {"acl": 2})
+        assert not cloud.find("RS-0001/osd", lambda b: b["data"] == {"acl": 2})
+    finally:
+        forger.disconnect()
+        forger.loop_stop()
     assert _login(stack["broker_port"], GW, "wrong-password")[0] is None
     assert _login(stack["broker_port"], "cloud", GATEWAY_PW)[0] is None
 
