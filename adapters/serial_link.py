@@ -13,6 +13,7 @@ import asyncio
 import contextlib
 import logging
 import queue
+import select
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -116,10 +117,30 @@ class SerialLink:
 
     # -- threads ----------------------------------------------------------------------------------
     def _read_loop(self, port: serial.SerialBase, gen: int) -> None:
+        # Wait for the port to be readable, then take everything there in one read: one hand-off to
+        # the loop per burst, not per byte (pyserial's socket:// reports in_waiting as 0 or 1, so
+        # read(in_waiting) crawls byte by byte). Ports without a file descriptor read as before.
+        try:
+            fd: int | None = port.fileno()
+        except (AttributeError, OSError, ValueError, serial.SerialException):
+            fd = None
+        if fd is not None:
+            try:
+                port.timeout = 0  # once: select() does the waiting, read() takes what is there
+            except (serial.SerialException, OSError, ValueError):
+                fd = None
         while gen == self._generation:
             try:
-                data = port.read(max(1, port.in_waiting or 1))
-            except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+                if fd is not None:
+                    ready, _, _ = select.select([fd], [], [], 0.1)
+                    if not ready:
+                        continue
+                    data = port.read(65536)
+                    if not data:  # readable but empty: the other end went away
+                        raise serial.SerialException("port closed by the device side")
+                else:
+                    data = port.read(max(1, port.in_waiting or 1))
+            except (serial.SerialException, OSError, TypeError, AttributeError, ValueError) as exc:
                 self._from_thread(self._failed, gen, f"read failed: {type(exc).__name__}: {exc}")
                 return
             if data:

@@ -111,6 +111,8 @@ SUITES: list[tuple[str, Suite]] = [
     ("codecs", _lazy("bench.codecs")),
     ("e2e", _lazy("bench.e2e")),
     ("drc", _lazy("bench.drc")),
+    ("scale", _lazy("bench.scale")),
+    ("soak", _lazy("bench.soak")),
 ]
 
 
