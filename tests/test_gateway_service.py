@@ -218,3 +218,40 @@ def test_a_bad_config_fails_with_one_clear_line(tmp_path: Any) -> None:
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "devices.0.rsdk.bitrate" in lines[0], proc.stderr
+
+
+def test_a_can_adapter_that_disappears_and_comes_back(broker: LocalBroker) -> None:
+    """The USB-CAN adapter (an SLCAN simulator process on a TCP port) vanishes: the gimbal goes offline
+    and its methods answer 325012; the adapter is back on the same port: the link reopens by itself."""
+    from gateway.local_broker import free_port
+
+    port = free_port()
+    sim = _spawn(["simulate", "rsdk", "--tcp", str(port)])
+    assert sim.stdout is not None
+    sim.stdout.readline()
+    device = {"type": "rsdk", "sn": "RSDK-GONE-1", "interface": "slcan", "channel": f"socket://127.0.0.1:{port}",
+              "bus_options": {"sleep_after_open": 0}, "reopen_interval": 0.5}  # fmt: skip
+    settings = gateway_settings(broker.port, [device], dispatcher={"require_authority": False})
+    cloud = CloudClient(broker.host, broker.port, GW)
+    try:
+        with GatewayThread(settings) as gw:
+            wait_until(lambda: gw.app.devices.by_sn("RSDK-GONE-1").online, 10, what="gimbal online")
+            cloud.clear()
+            sim.kill()
+            sim.wait(5)
+            cloud.wait_for("status", lambda b: b["data"]["sub_devices"] == [], timeout=10)
+            assert (
+                cloud.service("camera_photo_take", {"payload_index": "1001-0-0"})["data"]["result"] == 325012
+            )
+            sim.stdout.close()
+            sim = _spawn(["simulate", "rsdk", "--tcp", str(port)])
+            assert sim.stdout is not None
+            sim.stdout.readline()
+            wait_until(lambda: gw.app.devices.by_sn("RSDK-GONE-1").online, 15, what="gimbal back")
+            assert cloud.service("camera_photo_take", {"payload_index": "1001-0-0"})["data"]["result"] == 0
+    finally:
+        cloud.close()
+        sim.terminate()
+        sim.wait(5)
+        if sim.stdout:
+            sim.stdout.close()

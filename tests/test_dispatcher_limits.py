@@ -1,0 +1,130 @@
+"""Limits that keep one misbehaving device or cloud from starving the rest: the number of requests in
+flight, a device that never answers, and the reply cache."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import Mapping
+from typing import Any
+
+from adapters.base import Adapter, CallResult, DeviceInfo, TelemetrySink
+from gateway.app import build_registry
+from gateway.clock import ManualClock, SystemClock
+from gateway.devices import DeviceTable
+from gateway.dispatcher import Dispatcher
+from gateway.metrics import Metrics
+from gateway.settings import DispatcherSettings
+from schemas import TopicKind, topic
+
+GW = "GW-LIMITS-1"
+
+
+class SlowAdapter(Adapter):
+    """Answers camera_photo_take only when released; camera_mode_switch at once."""
+
+    def __init__(self) -> None:
+        self.info = DeviceInfo(sn="SLOW-1", domain="1", type=1001, sub_type=0, payload_index="39-0-7")
+        self.release = asyncio.Event()
+        self.calls = 0
+        self.handlers = {"camera_photo_take": self._slow, "camera_mode_switch": self._fast}
+
+    @property
+    def online(self) -> bool:
+        return True
+
+    async def start(self, sink: TelemetrySink) -> None:
+        return None
+
+    async def stop(self) -> None:
+        return None
+
+    async def stop_motion(self) -> None:
+        return None
+
+    def osd_snapshot(self) -> Mapping[str, Any] | None:
+        return None
+
+    async def _slow(self, data: Any) -> CallResult:
+        self.calls += 1
+        await self.release.wait()
+        return CallResult()
+
+    async def _fast(self, data: Any) -> CallResult:
+        return CallResult()
+
+
+class Recorder:
+    def __init__(self) -> None:
+        self.replies: list[dict[str, Any]] = []
+
+    def publish(self, topic: str, payload: bytes, qos: int = 1, retain: bool = False) -> bool:
+        self.replies.append(json.loads(payload))
+        return True
+
+
+def _request(tid: str, method: str, **data: Any) -> bytes:
+    body = {
+        "tid": tid,
+        "bid": "b",
+        "timestamp": 0,
+        "method": method,
+        "data": {"payload_index": "39-0-7", **data},
+    }
+    return json.dumps(body).encode()
+
+
+def _dispatcher(settings: DispatcherSettings, clock: Any = None) -> tuple[Dispatcher, SlowAdapter, Recorder]:
+    adapter, out = SlowAdapter(), Recorder()
+    devices = DeviceTable([adapter])
+    devices.authority.payloads.add("39-0-7")
+    d = Dispatcher(gateway_sn=GW, registry=build_registry(), devices=devices, outbox=out, settings=settings,
+                   clock=clock or SystemClock(), metrics=Metrics())  # fmt: skip
+    return d, adapter, out
+
+
+def test_too_many_requests_in_flight_get_busy_and_others_still_pass() -> None:
+    async def scenario() -> None:
+        d, adapter, out = _dispatcher(DispatcherSettings(max_pending=2, request_timeout=2.0))
+        services = topic(TopicKind.SERVICES, GW)
+        for i in range(2):
+            d.submit(services, _request(f"slow-{i}", "camera_photo_take"))
+        await asyncio.sleep(0.05)
+        await d.handle(services, _request("third", "camera_photo_take"))  # the limit is reached: busy
+        assert out.replies[-1]["tid"] == "third" and out.replies[-1]["data"]["result"] == 314000
+        adapter.release.set()
+        await d.drain()
+        assert sorted(r["tid"] for r in out.replies if r["data"]["result"] == 0) == ["slow-0", "slow-1"]
+        await d.handle(services, _request("after", "camera_mode_switch", camera_mode=1))
+        assert out.replies[-1]["data"]["result"] == 0  # capacity is back
+        assert adapter.calls == 2
+
+    asyncio.run(scenario())
+
+
+def test_a_device_that_never_answers_yields_325004_within_the_deadline() -> None:
+    async def scenario() -> None:
+        d, _, out = _dispatcher(DispatcherSettings(request_timeout=0.2))
+        loop = asyncio.get_running_loop()
+        t0 = loop.time()
+        await d.handle(topic(TopicKind.SERVICES, GW), _request("hang", "camera_photo_take"))
+        assert out.replies[-1]["data"]["result"] == 325004
+        assert loop.time() - t0 < 1.0
+
+    asyncio.run(scenario())
+
+
+def test_the_reply_cache_expires() -> None:
+    async def scenario() -> None:
+        clock = ManualClock()
+        d, adapter, out = _dispatcher(DispatcherSettings(reply_cache_seconds=5.0), clock)
+        adapter.release.set()
+        services = topic(TopicKind.SERVICES, GW)
+        await d.handle(services, _request("same", "camera_photo_take"))
+        await d.handle(services, _request("same", "camera_photo_take"))
+        assert adapter.calls == 1 and len(out.replies) == 2 and out.replies[0] == out.replies[1]
+        clock.advance(6.0)  # an old tid seen again after the cache window is a new request
+        await d.handle(services, _request("same", "camera_photo_take"))
+        assert adapter.calls == 2
+
+    asyncio.run(scenario())
