@@ -29,8 +29,13 @@ def _setpoint(fc: OsdkFcDevice) -> tuple[float, float] | None:
     return fc.inspect(lambda m: None if m._sp is None else (m._sp.x, m._sp.y))
 
 
+DRC_USER, DRC_PASSWORD = "drc-pilot", "drc-aircraft-secret-31f"
+
+
 @pytest.fixture
 def rig(private_broker: LocalBroker) -> Iterator[dict[str, Any]]:
+    """The cloud's broker, plus a DRC broker with username/password that drc_mode_enter names."""
+    drc_broker = LocalBroker(users={DRC_USER: DRC_PASSWORD}).start()
     fc = OsdkFcDevice(OsdkFcModel())
     pty = PtyEndpoint(fc).start()
     settings = gateway_settings(
@@ -46,15 +51,19 @@ def rig(private_broker: LocalBroker) -> Iterator[dict[str, Any]]:
         adapter = gw.app.devices.by_sn(SN)
         asyncio.run_coroutine_threadsafe(adapter._flight_task(1), gw.loop).result(5)  # take off
         wait_until(lambda: fc.inspect(lambda m: m.in_air and m.display_mode == 6), 10, what="airborne")
-        same = {"address": f"127.0.0.1:{private_broker.port}", "client_id": "drc", "username": "",
-                "password": "", "expire_time": 0, "enable_tls": False}  # fmt: skip
-        r = cloud.service("drc_mode_enter", {"mqtt_broker": same, "osd_frequency": 10, "hsi_frequency": 2})
+        link = {"address": f"127.0.0.1:{drc_broker.port}", "client_id": "drc-gw", "username": DRC_USER,
+                "password": DRC_PASSWORD, "expire_time": int(time.time()) + 600,
+                "enable_tls": False}  # fmt: skip
+        r = cloud.service("drc_mode_enter", {"mqtt_broker": link, "osd_frequency": 10, "hsi_frequency": 2})
         assert r["data"]["result"] == 0
-        yield {"fc": fc, "pty": pty, "cloud": cloud, "gw": gw, "broker": private_broker}
+        drc = CloudClient(drc_broker.host, drc_broker.port, GW, username=DRC_USER, password=DRC_PASSWORD)
+        yield {"fc": fc, "pty": pty, "cloud": cloud, "drc": drc, "gw": gw, "drc_broker": drc_broker}
+        drc.close()
     finally:
         gw.stop()
         cloud.close()
         pty.stop()
+        drc_broker.stop()
 
 
 def _down(cloud: CloudClient, method: str, data: dict[str, Any]) -> None:
@@ -62,7 +71,7 @@ def _down(cloud: CloudClient, method: str, data: dict[str, Any]) -> None:
 
 
 def test_sticks_fly_the_aircraft_and_stopping_them_brakes(rig: dict[str, Any]) -> None:
-    fc, cloud = rig["fc"], rig["cloud"]
+    fc, cloud = rig["fc"], rig["drc"]
     _down(cloud, "heart_beat", {"seq": 1, "timestamp": 11})
     assert cloud.wait_for("drc/up", lambda b: b["method"] == "heart_beat")[0]["data"] == {
         "seq": 1,
@@ -84,11 +93,14 @@ def test_sticks_fly_the_aircraft_and_stopping_them_brakes(rig: dict[str, Any]) -
     )
     assert zero_at - last < 0.5 + 0.04 + 0.3
     wait_until(lambda: fc.inspect(lambda m: m.speed) < 0.3, 5, what="braked to a hover")
-    assert cloud.service("drc_mode_exit", {})["data"]["result"] == 0
+    assert rig["cloud"].service("drc_mode_exit", {})["data"]["result"] == 0
+    rig["cloud"].wait_for(
+        "events", lambda b: b["method"] == "drc_status_notify" and b["data"]["drc_state"] == 0
+    )
 
 
 def test_heartbeats_stop_while_sticks_flood_in(rig: dict[str, Any]) -> None:
-    fc, cloud, gw = rig["fc"], rig["cloud"], rig["gw"]
+    fc, cloud, gw = rig["fc"], rig["drc"], rig["gw"]
     stop = threading.Event()
 
     def flood() -> None:  # sticks as fast as paho can publish them, no heartbeats
@@ -105,9 +117,8 @@ def test_heartbeats_stop_while_sticks_flood_in(rig: dict[str, Any]) -> None:
     try:
         wait_until(lambda: _setpoint(fc) == (2.0, 0.0), 5, what="flying under the flood")
         # heartbeats are overdue: stop and 514301, even with the sticks still pouring in
-        cloud.wait_for(
-            "events", lambda b: b["method"] == "drc_status_notify" and b["data"]["result"] == 514301
-        )
+        hb_lost = lambda b: b["method"] == "drc_status_notify" and b["data"]["result"] == 514301  # noqa: E731
+        rig["cloud"].wait_for("events", hb_lost)  # events travel on the cloud's broker
         wait_until(lambda: _setpoint(fc) == (0.0, 0.0), 3, what="stopped without heartbeats")
         # heartbeats are still echoed one by one in the middle of the flood
         for i in range(20):
@@ -120,7 +131,7 @@ def test_heartbeats_stop_while_sticks_flood_in(rig: dict[str, Any]) -> None:
 
 
 def test_emergency_stop_brakes_and_holds(rig: dict[str, Any]) -> None:
-    fc, cloud = rig["fc"], rig["cloud"]
+    fc, cloud = rig["fc"], rig["drc"]
     _down(cloud, "heart_beat", {"seq": 1, "timestamp": 1})
     for seq in range(1, 6):
         _down(cloud, "drone_control", {"seq": seq, "x": -4.0})  # seed: +x left, so -x is right (east)
@@ -139,7 +150,7 @@ def test_emergency_stop_brakes_and_holds(rig: dict[str, Any]) -> None:
 
 
 def test_broker_killed_mid_drc_stops_the_aircraft(rig: dict[str, Any]) -> None:
-    fc, cloud, broker = rig["fc"], rig["cloud"], rig["broker"]
+    fc, cloud, broker = rig["fc"], rig["drc"], rig["drc_broker"]
     _down(cloud, "heart_beat", {"seq": 1, "timestamp": 1})
     for seq in range(1, 6):
         _down(cloud, "drone_control", {"seq": seq, "y": 3.0})
@@ -149,10 +160,12 @@ def test_broker_killed_mid_drc_stops_the_aircraft(rig: dict[str, Any]) -> None:
     broker.stop(kill=True)
     wait_until(lambda: _setpoint(fc) == (0.0, 0.0), 3, what="stopped with the broker gone")
     wait_until(lambda: fc.inspect(lambda m: m.speed) < 0.3, 5, what="hovering")
+    lost = {"result": 514303, "drc_state": 0}  # the session ends; the cloud hears why on its own broker
+    rig["cloud"].wait_for("events", lambda b: b["method"] == "drc_status_notify" and b["data"] == lost)
 
 
 def test_a_stalled_device_link_does_not_stall_the_gateway(rig: dict[str, Any]) -> None:
-    fc, pty, cloud = rig["fc"], rig["pty"], rig["cloud"]
+    fc, pty, cloud = rig["fc"], rig["pty"], rig["drc"]
     _down(cloud, "heart_beat", {"seq": 1, "timestamp": 1})
     _down(cloud, "drone_control", {"seq": 1, "y": 2.0})
     wait_until(lambda: _setpoint(fc) == (2.0, 0.0), 5, what="flying")
@@ -162,7 +175,7 @@ def test_a_stalled_device_link_does_not_stall_the_gateway(rig: dict[str, Any]) -
             _down(cloud, "heart_beat", {"seq": 10 + i, "timestamp": 10 + i})
         cloud.wait_for("drc/up", lambda b: b["method"] == "heart_beat" and b["data"]["seq"] >= 10, count=5)
         t0 = time.monotonic()
-        r = cloud.service("x_osdk_hotpoint_stop", {})
+        r = rig["cloud"].service("x_osdk_hotpoint_stop", {})
         assert r["data"]["result"] in (325004, 325012) and time.monotonic() - t0 < 3.0
     finally:
         pty.paused = False
