@@ -112,6 +112,7 @@ SUITES: list[tuple[str, Suite]] = [
     ("e2e", _lazy("bench.e2e")),
     ("drc", _lazy("bench.drc")),
     ("scale", _lazy("bench.scale")),
+    ("fleet", _lazy("bench.fleet")),
     ("soak", _lazy("bench.soak")),
 ]
 

@@ -26,7 +26,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from adapters.osdk.protocol import SessionMode
-from adapters.osdk.telemetry import BitLayout, Bits, FlightDataCodec, check_firmware, examples_of
+from adapters.osdk.telemetry import FlightDataCodec, check_firmware, examples_of
+from adapters.wire.bits import BitLayout, Bits
 from adapters.wire.layout import Field, Layout, LayoutError, PayloadCodec, Tail
 
 __all__ = [
@@ -272,7 +273,7 @@ EMERGENCY_BRAKE_FLAG = 0x48
 
 def _names(codec: PayloadCodec) -> list[str]:
     if isinstance(codec, BitLayout):
-        return codec.names
+        return codec.field_names
     if isinstance(codec, Layout):
         return [f.name for f in codec.fields] + ([codec.tail.name] if codec.tail else [])
     return []

@@ -29,28 +29,14 @@ from adapters.osdk.commands import (
     specs_at,
 )
 from adapters.osdk.protocol import BadFrame, Decoder, Frame
-from adapters.osdk.telemetry import BitLayout, FlightDataCodec, check_firmware
+from adapters.osdk.telemetry import FlightDataCodec, check_firmware
+from adapters.wire.bits import BitLayout
+from adapters.wire.describe_util import check_options, jsonable
 from adapters.wire.layout import Layout, LayoutError, PayloadCodec
 
 __all__ = ["COMMANDS", "decode_bytes", "encode_command"]
 
 COMMANDS: list[str] = list(COMMAND_NAMES)
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, bytes | bytearray):
-        return bytes(value).hex()
-    if isinstance(value, Mapping):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    return value
-
-
-def _options(options: dict[str, Any], allowed: set[str]) -> None:
-    unknown = set(options) - allowed
-    if unknown:
-        raise ValueError(f"unknown option(s) {sorted(unknown)}; valid: {sorted(allowed)}")
 
 
 def _base(frame: Frame) -> dict[str, Any]:
@@ -92,7 +78,7 @@ def _with_ack_text(out: dict[str, Any], spec: CommandSpec, fields: Mapping[str, 
 
 def decode_bytes(data: bytes, **options: Any) -> list[dict[str, Any]]:
     """One dict per frame or BadFrame, in stream order (the decoder is flushed at the end)."""
-    _options(options, {"firmware", "ack_command"})
+    check_options(options, {"firmware", "ack_command"}, "osdk")
     firmware = check_firmware(options.get("firmware", "new"))
     ack_command: str | None = options.get("ack_command")
     if ack_command is not None:
@@ -114,7 +100,7 @@ def decode_bytes(data: bytes, **options: Any) -> list[dict[str, Any]]:
                 d["command"] = name
                 try:
                     msg = decode_ack(name, item.payload, firmware)
-                    d["fields"] = _jsonable(msg.fields)
+                    d["fields"] = jsonable(msg.fields)
                     _with_ack_text(d, spec_for(name, firmware), msg.fields)
                 except LayoutError as exc:
                     d["error"], d["payload"] = str(exc), item.payload.hex()
@@ -130,7 +116,7 @@ def decode_bytes(data: bytes, **options: Any) -> list[dict[str, Any]]:
             d["command"] = names[0] if len(names) == 1 else None
             d["error"], d["payload"] = str(exc), item.payload.hex()
         else:
-            d["command"], d["fields"] = msg.name, _jsonable(msg.fields)
+            d["command"], d["fields"] = msg.name, jsonable(msg.fields)
             if item.session >= 1 and spec_for(msg.name, firmware).ack:
                 awaiting[(item.session, item.seq)] = msg.name
         out.append(d)
@@ -166,7 +152,7 @@ def _from_hex(codec: PayloadCodec, fields: Mapping[str, Any]) -> dict[str, Any]:
 def encode_command(command: str, seq: int, fields: dict[str, Any], **options: Any) -> bytes:
     """One complete frame for ``command``. Missing fields take the table's defaults, then zero.
     Unknown command, field or option -> ValueError naming the valid ones."""
-    _options(options, {"firmware", "session", "ack"})
+    check_options(options, {"firmware", "session", "ack"}, "osdk")
     firmware = check_firmware(options.get("firmware", "new"))
     spec = spec_for(command, firmware)
     if options.get("ack"):

@@ -8,8 +8,8 @@ items were confirmed against DJI Onboard-SDK 3.3 ``dji_telemetry.hpp`` (``GPSInf
 ``RelativePosition``, ``SDKInfo``), whose packed sizes add up to the notes' item sizes (arithmetic next
 to each layout). Values stay in wire units (radians, 1e-7 degrees, mm, cm/s, raw RC ticks).
 
-Also owns :class:`BitLayout`, the small bit-field wrapper the OSDK structs need (``x : 4`` members);
-``commands.py`` uses it too. It could move into ``adapters.wire.layout`` as a generic ``Field(bits=...)``.
+Bit-field members (``x : 4``) use the shared :class:`adapters.wire.bits.BitLayout`; ``BitLayout`` and
+``Bits`` are re-exported here because tests and older callers import them from this module.
 
 Owns: item layouts, bitmap packing, :class:`FlightDataCodec` (the table's payload codec for the push).
 Must not know frames, sessions, clocks or what the gateway does with the values. Sans-I/O.
@@ -17,10 +17,11 @@ Must not know frames, sessions, clocks or what the gateway does with the values.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from adapters.wire.bits import BitLayout, Bits
 from adapters.wire.layout import Field, Layout, LayoutError, PayloadCodec
 
 __all__ = [
@@ -47,102 +48,6 @@ def check_firmware(firmware: str) -> str:
     if firmware not in FIRMWARES:
         raise ValueError(f"firmware must be one of {list(FIRMWARES)}, got {firmware!r}")
     return firmware
-
-
-# --------------------------------------------------------------------------------------------------
-# Bit fields
-
-
-@dataclass(frozen=True, slots=True)
-class Bits:
-    """Split the integer field ``field`` into named parts ``(name, width)`` from bit 0 upward, as a
-    little-endian C compiler lays out ``uint8_t a : 1; uint8_t b : 7;``."""
-
-    field: str
-    parts: tuple[tuple[str, int], ...]
-
-
-class BitLayout:
-    """A :class:`Layout` whose listed integer fields are exposed as their bit-field parts.
-
-    Decoding replaces the field by its parts (in place, so the field order stays the struct's order);
-    encoding packs the parts back and rejects a part that does not fit its width."""
-
-    __slots__ = ("_bits", "layout")
-
-    def __init__(self, fields: Iterable[Field], bits: Iterable[Bits]) -> None:
-        self.layout = Layout(fields)
-        by_name = {f.name: f for f in self.layout.fields}
-        self._bits: dict[str, Bits] = {}
-        for b in bits:
-            f = by_name.get(b.field)
-            if f is None or f.code not in "BHI" or f.count != 1:
-                raise ValueError(f"{b.field}: bit fields need an unsigned scalar field")
-            width = {"B": 8, "H": 16, "I": 32}[f.code]
-            if sum(w for _, w in b.parts) != width:
-                raise ValueError(f"{b.field}: parts cover {sum(w for _, w in b.parts)} of {width} bits")
-            self._bits[b.field] = b
-        names = self.names
-        if len(set(names)) != len(names):
-            raise ValueError(f"duplicate field names in {names}")
-
-    @property
-    def bits(self) -> tuple[Bits, ...]:
-        return tuple(self._bits.values())
-
-    @property
-    def names(self) -> list[str]:
-        """Field names as decoded (bit-field parts in place of their carrier field)."""
-        out: list[str] = []
-        for f in self.layout.fields:
-            b = self._bits.get(f.name)
-            if b is None:
-                out.append(f.name)
-            else:
-                out.extend(p for p, _ in b.parts)
-        return out
-
-    @property
-    def size(self) -> int | None:
-        return self.layout.size
-
-    def decode(self, data: bytes) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        for name, value in self.layout.decode(data).items():
-            b = self._bits.get(name)
-            if b is None:
-                out[name] = value
-                continue
-            for part, width in b.parts:
-                out[part] = value & ((1 << width) - 1)
-                value >>= width
-        return out
-
-    def encode(self, values: Mapping[str, Any]) -> bytes:
-        unknown = set(values) - set(self.names)
-        if unknown:
-            raise LayoutError(f"unknown field(s) {sorted(unknown)}; known: {sorted(self.names)}")
-        raw: dict[str, Any] = {}
-        for f in self.layout.fields:
-            b = self._bits.get(f.name)
-            if b is None:
-                if f.name in values:
-                    raw[f.name] = values[f.name]
-                continue
-            packed, shift = 0, 0
-            for part, width in b.parts:
-                v = values.get(part, 0)
-                if isinstance(v, bool):
-                    v = int(v)
-                if not isinstance(v, int) or not 0 <= v < (1 << width):
-                    raise LayoutError(f"{part}: {v!r} does not fit {width} bit(s)")
-                packed |= v << shift
-                shift += width
-            raw[f.name] = packed
-        return self.layout.encode(raw)
-
-    def example(self) -> dict[str, Any]:
-        return self.decode(self.layout.encode(self.layout.example()))
 
 
 def examples_of(codec: PayloadCodec) -> list[dict[str, Any]]:

@@ -21,7 +21,8 @@ decode: 0x0203 is listed as 16 bytes in the summary tables but defined as 12 (x,
 2026 0x0208 is listed as 6 but defined as 8.
 
 Bit fields: the official structs use C bitfields in three places (0x0001 byte 0, 0x0201 byte 12,
-0x0206). :class:`BitLayout` splits such a word into named fields, LSB first, and packs them back;
+0x0206). :class:`adapters.wire.bits.BitLayout` splits such a word into named fields, LSB first, and
+packs them back;
 every bit belongs to a named field (unnamed bits become ``..._reserved``), so a payload survives
 decode/encode unchanged. Whole-word bit masks that the documents type as one integer
 (``event_data``, ``rfid_status``, ``sentry_info``, ``remaining_energy``) stay integers: their bit
@@ -62,6 +63,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from adapters.robomaster.protocol import Frame, encode_frame
+from adapters.wire import bits as wire_bits
 from adapters.wire.layout import Field, Layout, LayoutError, PayloadCodec, Tail
 
 __all__ = [
@@ -123,9 +125,14 @@ def check_season(season: str | int) -> str:
 # --------------------------------------------------------------------------- bit fields
 
 
+# The shared implementation is adapters.wire.bits (the tables below use it directly). ``Bits`` and
+# ``BitLayout`` keep this module's older spelling, ``BitLayout(fields, {word: (Bits(name, width), ...)})``,
+# for importers; both build the shared codec.
+
+
 @dataclass(frozen=True, slots=True)
 class Bits:
-    """One C bitfield member: ``width`` bits, allocated LSB first like GCC/ARMCC on little-endian."""
+    """One C bitfield member, ``width`` bits (older spelling; see :class:`adapters.wire.bits.Bits`)."""
 
     name: str
     width: int
@@ -133,91 +140,20 @@ class Bits:
     doc: str = ""
 
 
-class BitLayout:
-    """A :class:`Layout` whose integer "word" fields are split into named bit fields.
+class BitLayout(wire_bits.BitLayout):
+    """:class:`adapters.wire.bits.BitLayout` built from ``{word: (Bits(name, width), ...)}``, LSB first."""
 
-    ``bits`` maps a word field's name to its members, LSB first; the widths must cover the word
-    exactly, so no bit is lost on decode/encode. The word's own name never appears outside."""
-
-    __slots__ = ("bits", "layout")
+    __slots__ = ()
 
     def __init__(self, fields: Iterable[Field], bits: Mapping[str, Sequence[Bits]]) -> None:
-        layout = Layout(fields)
-        by_name = {f.name: f for f in layout.fields}
-        for word, members in bits.items():
-            f = by_name.get(word)
-            if f is None or f.count != 1 or f.code not in "BHIQ":
-                raise ValueError(f"{word}: bit fields need a single unsigned integer field")
-            width = 8 * Layout([f]).fixed_size
-            if sum(b.width for b in members) != width or any(b.width < 1 for b in members):
-                raise ValueError(f"{word}: bit widths must add up to {width}")
-        self.layout = layout
-        self.bits = {k: tuple(v) for k, v in bits.items()}
-        names = self.field_names
-        if len(set(names)) != len(names):
-            raise ValueError(f"duplicate field names in {names}")
-
-    @property
-    def field_names(self) -> list[str]:
-        out: list[str] = []
-        for f in self.layout.fields:
-            if f.name in self.bits:
-                out.extend(b.name for b in self.bits[f.name])
-            else:
-                out.append(f.name)
-        return out
-
-    @property
-    def size(self) -> int | None:
-        return self.layout.size
-
-    def decode(self, data: bytes) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        for name, value in self.layout.decode(data).items():
-            members = self.bits.get(name)
-            if members is None:
-                out[name] = value
-                continue
-            for b in members:
-                out[b.name] = value & ((1 << b.width) - 1)
-                value >>= b.width
-        return out
-
-    def encode(self, values: Mapping[str, Any]) -> bytes:
-        known = self.field_names
-        unknown = set(values) - set(known)
-        if unknown:
-            raise LayoutError(f"unknown field(s) {sorted(unknown)}; known: {sorted(known)}")
-        packed = {k: v for k, v in values.items() if k in {f.name for f in self.layout.fields}}
-        for word, members in self.bits.items():
-            value, shift = 0, 0
-            for b in members:
-                v = values.get(b.name, 0)
-                if isinstance(v, bool):
-                    v = int(v)
-                if not isinstance(v, int) or not 0 <= v < 1 << b.width:
-                    raise LayoutError(f"{b.name}: {v!r} is not an integer in 0..{(1 << b.width) - 1}")
-                value |= v << shift
-                shift += b.width
-            packed[word] = value
-        return self.layout.encode(packed)
-
-    def example(self) -> dict[str, Any]:
-        ex = self.layout.example()
-        out: dict[str, Any] = {}
-        for name, value in ex.items():
-            members = self.bits.get(name)
-            if members is None:
-                out[name] = value
-            else:
-                for k, b in enumerate(members, start=1):
-                    out[b.name] = min(k, (1 << b.width) - 1)
-        return out
+        super().__init__(
+            fields, (wire_bits.Bits(word, tuple((b.name, b.width) for b in ms)) for word, ms in bits.items())
+        )
 
 
 def codec_field_names(codec: PayloadCodec) -> list[str]:
     """The public field names of a table layout, in wire order (tail last)."""
-    if isinstance(codec, BitLayout):
+    if isinstance(codec, wire_bits.BitLayout):
         return codec.field_names
     if isinstance(codec, Layout):
         return [f.name for f in codec.fields] + ([codec.tail.name] if codec.tail else [])
@@ -226,7 +162,7 @@ def codec_field_names(codec: PayloadCodec) -> list[str]:
 
 def size_range(codec: PayloadCodec) -> tuple[int, int]:
     """Smallest and largest payload (bytes) a table layout accepts."""
-    if isinstance(codec, BitLayout):
+    if isinstance(codec, wire_bits.BitLayout):
         codec = codec.layout
     if isinstance(codec, Layout):
         if codec.tail is None:
@@ -313,9 +249,9 @@ class RefereeCommand:
     layouts: Mapping[str, tuple[PayloadCodec, ...]] = field(repr=False)
 
 
-_GAME_STATUS = BitLayout(
+_GAME_STATUS = wire_bits.BitLayout(
     [_u8("_type_progress"), _u16("stage_remain_time", "s"), _u64("sync_time_stamp", "s", "UNIX time")],
-    {"_type_progress": (Bits("game_type", 4), Bits("game_progress", 4))},
+    (wire_bits.Bits("_type_progress", (("game_type", 4), ("game_progress", 4))),),
 )
 
 
@@ -336,7 +272,7 @@ def _team_hp(team: str, slot5: str) -> list[str]:
     ]
 
 
-_ROBOT_STATUS = BitLayout(
+_ROBOT_STATUS = wire_bits.BitLayout(
     [
         _u8("robot_id"),
         _u8("robot_level"),
@@ -347,14 +283,17 @@ _ROBOT_STATUS = BitLayout(
         _u16("chassis_power_limit", "W"),
         _u8("_power_output"),
     ],
-    {
-        "_power_output": (
-            Bits("power_management_gimbal_output", 1),
-            Bits("power_management_chassis_output", 1),
-            Bits("power_management_shooter_output", 1),
-            Bits("power_management_reserved", 5),
-        )
-    },
+    (
+        wire_bits.Bits(
+            "_power_output",
+            (
+                ("power_management_gimbal_output", 1),
+                ("power_management_chassis_output", 1),
+                ("power_management_shooter_output", 1),
+                ("power_management_reserved", 5),
+            ),
+        ),
+    ),
 )
 
 _ROBOT_POS = Layout([_f32("x", "m"), _f32("y", "m"), _f32("angle", "deg", "speed-module heading, north = 0")])
@@ -533,7 +472,11 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
         "armour/module id and HP deduction reason (0 projectile, 1 module offline, 5 collision ...)",
         "main control module->own robot",
         "hurt_data_t (2026 V1.2.0 table 1-15)",
-        _same(BitLayout([_u8("_hurt")], {"_hurt": (Bits("armor_id", 4), Bits("HP_deduction_reason", 4))})),
+        _same(
+            wire_bits.BitLayout(
+                [_u8("_hurt")], (wire_bits.Bits("_hurt", (("armor_id", 4), ("HP_deduction_reason", 4))),)
+            )
+        ),
     ),
     RefereeCommand(
         0x0207,

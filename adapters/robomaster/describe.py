@@ -26,6 +26,7 @@ from adapters.robomaster.commands import (
     encode_message,
 )
 from adapters.robomaster.protocol import DEFAULT_MAX_DATA_LEN, BadFrame, Decoder, Frame
+from adapters.wire.describe_util import check_options, jsonable
 
 __all__ = ["COMMANDS", "OPTIONS", "decode_bytes", "encode_command"]
 
@@ -55,9 +56,7 @@ def _int(name: str, value: Any) -> int:
 
 
 def _settings(options: Mapping[str, Any]) -> tuple[str, ControlChannel, int]:
-    unknown = set(options) - set(OPTIONS)
-    if unknown:
-        raise ValueError(f"unknown option(s) {sorted(unknown)} for robomaster; valid: {', '.join(OPTIONS)}")
+    check_options(options, OPTIONS, PROTOCOL)
     season = check_season(options.get("season") or DEFAULT_SEASON)
     kwargs = {
         key: _int(opt, options[opt])
@@ -72,14 +71,6 @@ def _settings(options: Mapping[str, Any]) -> tuple[str, ControlChannel, int]:
     control = ControlChannel(**kwargs) if kwargs else DEFAULT_CONTROL
     max_len = options.get("max_data_len")
     return season, control, DEFAULT_MAX_DATA_LEN if max_len is None else _int("max_data_len", max_len)
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, bytes | bytearray):
-        return bytes(value).hex()
-    if isinstance(value, list):
-        return [_jsonable(v) for v in value]
-    return value
 
 
 def _record(event: Frame | BadFrame, season: str, control: ControlChannel) -> dict[str, Any]:
@@ -110,7 +101,7 @@ def _record(event: Frame | BadFrame, season: str, control: ControlChannel) -> di
     except MessageError as exc:
         rec.update(command=exc.name, error=str(exc), payload=event.data.hex())
     else:
-        rec.update(command=msg.name, fields={k: _jsonable(v) for k, v in msg.fields.items()})
+        rec.update(command=msg.name, fields=jsonable(msg.fields))
     return rec
 
 

@@ -8,13 +8,14 @@ whose command is not in the input. Must not know MQTT, the gateway or any bus li
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable
 from typing import Any
 
 from adapters.rsdk import commands as cmds
 from adapters.rsdk.can import GIMBAL_TX_ID, HOST_TX_ID, Reassembler, segment
 from adapters.rsdk.candump import parse_lines
 from adapters.rsdk.protocol import BadFrame, Decoder, Frame
+from adapters.wire.describe_util import check_options, jsonable
 
 __all__ = ["COMMANDS", "decode_bytes", "decode_can_lines", "encode_can", "encode_command"]
 
@@ -26,23 +27,6 @@ _TEXTS: dict[str, Callable[[int], str]] = {
     "version": cmds.version_text,
     "device_id": lambda v: cmds.DEVICE_IDS.get(v, f"device 0x{v:08X}"),
 }
-
-
-def _check_options(options: Mapping[str, Any], allowed: Iterable[str]) -> None:
-    allowed = set(allowed)
-    unknown = set(options) - allowed
-    if unknown:
-        raise ValueError(f"unknown option(s) {sorted(unknown)}; valid: {sorted(allowed)}")
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, bytes | bytearray):
-        return bytes(value).hex()
-    if isinstance(value, Mapping):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    return value
 
 
 class _Session:
@@ -84,7 +68,7 @@ class _Session:
             out["error"] = str(e)
             out["payload"] = item.data.hex()
             return out
-        out.update(command=msg.name, cmd_set=msg.cmd_set, cmd_id=msg.cmd_id, fields=_jsonable(msg.fields))
+        out.update(command=msg.name, cmd_set=msg.cmd_set, cmd_id=msg.cmd_id, fields=jsonable(msg.fields))
         if item.is_reply:
             out["legacy"] = msg.legacy
         texts = {k: f(v) for k, f in _TEXTS.items() if isinstance(v := msg.fields.get(k), int)}
@@ -109,11 +93,11 @@ class _Session:
 def decode_bytes(data: bytes, **options: Any) -> list[dict[str, Any]]:
     """One dict per frame or BadFrame, in order. Options: ``can`` (data is candump text, see
     :func:`decode_can_lines`), ``reply_to`` (command name for replies whose command is not in the input)."""
-    _check_options(options, {"can", "reply_to", "host_id", "gimbal_id"})
+    check_options(options, {"can", "reply_to", "host_id", "gimbal_id"}, "rsdk")
     if options.get("can"):
         rest = {k: v for k, v in options.items() if k != "can"}
         return decode_can_lines(bytes(data).decode("utf-8", errors="replace"), **rest)
-    _check_options(options, {"can", "reply_to"})
+    check_options(options, {"can", "reply_to"}, "rsdk")
     session = _Session(options.get("reply_to"))
     decoder = Decoder()
     items = decoder.feed(data) + decoder.flush()
@@ -123,7 +107,7 @@ def decode_bytes(data: bytes, **options: Any) -> list[dict[str, Any]]:
 def decode_can_lines(text: str, **options: Any) -> list[dict[str, Any]]:
     """Decode candump text (screen or log format). Frames on ``gimbal_id`` (0x222) and ``host_id``
     (0x223) are reassembled per id; each dict also has ``can_id``. Other ids are skipped."""
-    _check_options(options, {"reply_to", "host_id", "gimbal_id"})
+    check_options(options, {"reply_to", "host_id", "gimbal_id"}, "rsdk")
     session = _Session(options.get("reply_to"))
     ids = (int(options.get("host_id", HOST_TX_ID)), int(options.get("gimbal_id", GIMBAL_TX_ID)))
     reassemblers = {i: Reassembler(i) for i in ids}
@@ -148,7 +132,7 @@ def encode_command(command: str, seq: int, fields: dict[str, Any], **options: An
     """Frame bytes for a table command. Options: ``reply`` (encode its reply, as the gimbal would),
     ``legacy`` (that reply in the old format), ``cmd_type`` (override the CmdType reply type).
     Unknown command or field -> ValueError listing the valid names."""
-    _check_options(options, {"reply", "legacy", "cmd_type"})
+    check_options(options, {"reply", "legacy", "cmd_type"}, "rsdk")
     return cmds.encode_command(
         command,
         seq,
@@ -162,7 +146,7 @@ def encode_command(command: str, seq: int, fields: dict[str, Any], **options: An
 def encode_can(command: str, seq: int, fields: dict[str, Any], **options: Any) -> list[tuple[int, bytes]]:
     """The CAN frames for :func:`encode_command`; ``arb_id`` defaults to 0x223 for commands and 0x222
     for replies (``reply=True``)."""
-    _check_options(options, {"reply", "legacy", "cmd_type", "arb_id"})
+    check_options(options, {"reply", "legacy", "cmd_type", "arb_id"}, "rsdk")
     rest = {k: v for k, v in options.items() if k != "arb_id"}
     default_id = GIMBAL_TX_ID if options.get("reply") else HOST_TX_ID
     return segment(encode_command(command, seq, fields, **rest), int(options.get("arb_id", default_id)))
