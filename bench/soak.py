@@ -96,10 +96,12 @@ def run(cfg: Config) -> list[Row]:
             w = 20.0 if (sticks // 40) % 2 else -20.0
             cloud.publish(down, json.dumps({"method": "drone_control", "data": {"seq": sticks, "w": w}}))
             time.sleep(0.05)
+        # read the failsafe counter while sticks and heartbeats still flow: once they stop, the failsafe
+        # rightly fires, and that one must not be counted against the soak
+        failsafes = gw.app.metrics.count("drc_failsafe_stops_total")
         time.sleep(1.0)
         rss1 = _rss_mb()
         missed = beats - len(echoes & set(range(1, beats + 1)))
-        failsafes = gw.app.metrics.count("drc_failsafe_stops_total")
         cloud.disconnect()
         cloud.loop_stop()
         gw.stop()
