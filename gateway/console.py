@@ -29,6 +29,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from gateway.mqtt import close_client
+
 if TYPE_CHECKING:
     import paho.mqtt.client as paho
     from rich.console import RenderableType
@@ -254,6 +256,7 @@ class _Link:
     def close(self) -> None:
         self.client.disconnect()
         self.client.loop_stop()
+        close_client(self.client)
 
 
 # ------------------------------------------------------------------------------------------ send

@@ -276,10 +276,12 @@ class DrcController:
         elif method == "drone_control":
             result, output = self._stick(request.data)
             if result == ResultCode.SUCCESS:
-                # on the wire now, not at the next stream tick: stick-to-wire latency is one frame
+                # on the wire now, not at the next stream tick: stick-to-wire latency is one frame.
+                # Never while a failsafe holds the vehicle: the stream thread owns the zero set-point then.
                 with self._lock:
                     setpoint = self.setpoint
-                for adapter in self._targets():
+                    halted = self.estop or self.stopped_for_heartbeat
+                for adapter in [] if halted else self._targets():
                     with contextlib.suppress(Exception):
                         adapter.drive(*setpoint)
             if result is not None:

@@ -33,6 +33,7 @@ from prometheus_client.parser import text_string_to_metric_families
 from gateway.cli import build_parser
 from gateway.cli import main as cli_main
 from gateway.local_broker import find_mosquitto, free_port, port_open
+from gateway.mqtt import close_client
 from gateway.settings import load_settings
 from tests.support import CloudClient, wait_until
 
@@ -325,6 +326,7 @@ def _login(port: int, username: str, password: str) -> tuple[paho.Client | None,
     assert done.wait(5), "no CONNACK"
     if outcome[0] != "ok":
         client.loop_stop()
+        close_client(client)
         return None, outcome[0]
     return client, "ok"
 
@@ -370,6 +372,7 @@ def test_the_compose_topology_runs_as_plain_processes(
     finally:
         probe.disconnect()
         probe.loop_stop()
+        close_client(probe)
     # ... and the cloud's user may send commands, never a gateway's replies or telemetry
     forger, outcome = _login(stack["broker_port"], "cloud", CLOUD_PW)
     assert forger is not None, outcome
@@ -383,6 +386,7 @@ def test_the_compose_topology_runs_as_plain_processes(
     finally:
         forger.disconnect()
         forger.loop_stop()
+        close_client(forger)
     assert _login(stack["broker_port"], GW, "wrong-password")[0] is None
     assert _login(stack["broker_port"], "cloud", GATEWAY_PW)[0] is None
 

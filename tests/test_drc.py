@@ -18,6 +18,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 
 from adapters.rsdk.sim import GimbalCanSim
 from gateway.local_broker import LocalBroker
+from gateway.mqtt import close_client
 from tests.support import BusSniffer, CloudClient, GatewayThread, gateway_settings, wait_until
 
 pytestmark = pytest.mark.broker
@@ -71,6 +72,7 @@ class DrcClient:
     def close(self) -> None:
         self.client.disconnect()
         self.client.loop_stop()
+        close_client(self.client)
 
 
 @pytest.fixture
@@ -229,6 +231,7 @@ def test_drc_broker_killed_stops_motion_and_ends_the_session(rig: dict[str, Any]
     drc.send("drone_control", {"seq": 1, "w": 15.0})
     wait_until(lambda: model.yaw.speed == 15.0, 3, what="moving")
     drc.client.loop_stop()
+    close_client(drc.client)
     drc_broker.stop(kill=True)
     wait_until(lambda: model.yaw.speed == 0.0, 3, what="stopped when the DRC broker vanished")
     cloud.wait_for(

@@ -16,6 +16,7 @@ import pytest
 from adapters.osdk.sim import OsdkFcDevice, OsdkFcModel
 from adapters.simio import PtyEndpoint
 from gateway.local_broker import LocalBroker
+from gateway.mqtt import close_client
 from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
 
 pytestmark = pytest.mark.broker
@@ -157,6 +158,7 @@ def test_broker_killed_mid_drc_stops_the_aircraft(rig: dict[str, Any]) -> None:
         time.sleep(0.05)
     wait_until(lambda: _setpoint(fc) == (3.0, 0.0), 5, what="flying")
     cloud.client.loop_stop()
+    close_client(cloud.client)
     broker.stop(kill=True)
     wait_until(lambda: _setpoint(fc) == (0.0, 0.0), 3, what="stopped with the broker gone")
     wait_until(lambda: fc.inspect(lambda m: m.speed) < 0.3, 5, what="hovering")

@@ -3,6 +3,7 @@ SLCAN, and SIGTERM on the real ``dji-gateway run`` process."""
 
 from __future__ import annotations
 
+import gc
 import os
 import re
 import signal
@@ -178,6 +179,7 @@ def test_sigterm_stops_motion_publishes_offline_and_exits_0(broker: LocalBroker,
     finally:
         if proc.poll() is None:
             proc.kill()
+            proc.wait(5)
         out = proc.stdout.read() if proc.stdout else ""
         if proc.stdout:
             proc.stdout.close()
@@ -195,11 +197,13 @@ def test_a_vanished_gateway_is_announced_offline_by_its_will(broker: LocalBroker
         cloud.clear()
         proc.kill()  # no goodbye: the broker publishes the will
         proc.wait(5)
+        proc.wait(5)
         will = cloud.wait_for("status", timeout=10)[-1]
         assert will["method"] == "update_topo" and will["data"]["sub_devices"] == []
     finally:
         if proc.poll() is None:
             proc.kill()
+            proc.wait(5)
         if proc.stdout:
             proc.stdout.close()
         cloud.close()
@@ -220,6 +224,10 @@ def test_a_bad_config_fails_with_one_clear_line(tmp_path: Any) -> None:
     assert len(lines) == 1 and "devices.0.rsdk.bitrate" in lines[0], proc.stderr
 
 
+# python-can's slcan bus leaves its socket open when its own start-up handshake fails (as it may while the
+# adapter is going away); the leak is collected inside this test and not blamed on a later one
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+@pytest.mark.filterwarnings("ignore::ResourceWarning")
 def test_a_can_adapter_that_disappears_and_comes_back(broker: LocalBroker) -> None:
     """The USB-CAN adapter (an SLCAN simulator process on a TCP port) vanishes: the gimbal goes offline
     and its methods answer 325012; the adapter is back on the same port: the link reopens by itself."""
@@ -239,6 +247,7 @@ def test_a_can_adapter_that_disappears_and_comes_back(broker: LocalBroker) -> No
             cloud.clear()
             sim.kill()
             sim.wait(5)
+            sim.wait(5)
             cloud.wait_for("status", lambda b: b["data"]["sub_devices"] == [], timeout=10)
             assert (
                 cloud.service("camera_photo_take", {"payload_index": "1001-0-0"})["data"]["result"] == 325012
@@ -255,3 +264,4 @@ def test_a_can_adapter_that_disappears_and_comes_back(broker: LocalBroker) -> No
         sim.wait(5)
         if sim.stdout:
             sim.stdout.close()
+        gc.collect()

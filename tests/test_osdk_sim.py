@@ -802,6 +802,7 @@ def test_main_prints_where_it_listens_and_stops_on_sigterm() -> None:
     finally:
         if proc.poll() is None:
             proc.kill()
+            proc.wait(5)
             proc.wait()
         if proc.stdout:
             proc.stdout.close()

@@ -20,6 +20,7 @@ from adapters.osdk.sim import OsdkFcDevice, OsdkFcModel
 from adapters.rsdk.sim import GimbalCanSim
 from adapters.simio import PtyEndpoint
 from gateway.local_broker import LocalBroker
+from gateway.mqtt import close_client
 from tests.support import GatewayThread, gateway_settings, wait_until
 
 pytestmark = pytest.mark.broker
@@ -64,6 +65,7 @@ class PersistentCloud:
     def close(self) -> None:
         self.client.disconnect()
         self.client.loop_stop()
+        close_client(self.client)
 
 
 def _ne(lat: float, lon: float, n: float, e: float) -> tuple[float, float]:

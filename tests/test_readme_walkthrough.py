@@ -167,6 +167,7 @@ def test_the_walkthrough_moves_the_gimbal_and_flies_the_drone() -> None:
             if proc.poll() is None:
                 proc.kill()
                 proc.wait(5)
+                proc.wait(5)
             if proc.stdout:
                 proc.stdout.close()
 

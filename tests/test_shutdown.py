@@ -100,6 +100,7 @@ def test_sigterm_mid_mission_stops_every_device(broker: LocalBroker, tmp_path: P
     finally:
         if proc.poll() is None:
             proc.kill()
+            proc.wait(5)
         out = proc.stdout.read() if proc.stdout else ""
         if proc.stdout:
             proc.stdout.close()

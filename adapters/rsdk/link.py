@@ -120,6 +120,12 @@ class CanLink:
         if self._bus is not None:
             with contextlib.suppress(Exception):
                 self._bus.shutdown()
+            # python-can's slcan shutdown writes "C" first and, on a dead port, raises before it closes
+            # the port: close the serial/socket underneath ourselves so it does not leak
+            port = getattr(self._bus, "serialPortOrig", None)
+            if port is not None:
+                with contextlib.suppress(Exception):
+                    port.close()
             self._bus = None
 
     # -- threads ----------------------------------------------------------------------------------
