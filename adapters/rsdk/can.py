@@ -74,14 +74,24 @@ class Reassembler:
         data = bytes(data)
         if len(data) > CAN_MTU:
             return [BadFrame("CAN frame longer than 8 bytes", data)]
-        out: list[Frame | BadFrame] = []
-        if data and data[0] == SOF:
-            while self._held and not self._may_continue(len(data)):
+        held = self._held
+        if held and data and data[0] == SOF:
+            out: list[Frame | BadFrame] = []
+            while held and not self._may_continue(len(data)):
                 self._restart(out)
-        out += self._decoder.feed(data)
-        self._starts.append(len(self._held))
-        self._held += data
-        self._trim()
+            out += self._decoder.feed(data)
+        else:
+            out = self._decoder.feed(data)
+        self._starts.append(len(held))
+        held += data
+        # the common cases without _trim's list rebuild: a frame just completed (nothing pending), or
+        # the decoder holds exactly what we hold
+        pending = self._decoder.pending
+        if pending == 0:
+            held.clear()
+            self._starts.clear()
+        elif pending != len(held):
+            self._trim()
         return out
 
     def flush(self) -> list[Frame | BadFrame]:
