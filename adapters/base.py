@@ -77,6 +77,11 @@ class DeviceInfo:
     thing_version: str = "1.1.2"
     payload_index: str | None = None
 
+    @classmethod
+    def of(cls, sn: str, product: Any, payload_index: str | None = None) -> DeviceInfo:
+        """From a device's settings: its serial number, ``product`` fields and payload index."""
+        return cls(sn, product.domain, product.type, product.sub_type, product.thing_version, payload_index)
+
 
 @dataclass(frozen=True, slots=True)
 class CallResult:

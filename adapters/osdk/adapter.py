@@ -132,13 +132,7 @@ class AircraftAdapter(Adapter):
     def __init__(self, settings: OsdkDeviceSettings, *, now: Callable[[], float] = time.monotonic) -> None:
         self.settings = settings
         self.fw = settings.firmware
-        self.info = DeviceInfo(
-            sn=settings.sn,
-            domain=settings.product.domain,
-            type=settings.product.type,
-            sub_type=settings.product.sub_type,
-            thing_version=settings.product.thing_version,
-        )
+        self.info = DeviceInfo.of(settings.sn, settings.product)
         self.deadline = settings.deadline
         self._now = now
         self._link: SerialLink | None = None

@@ -109,14 +109,7 @@ class RobotAdapter(Adapter):
         self, settings: RobomasterDeviceSettings, *, now: Callable[[], float] = time.monotonic
     ) -> None:
         self.settings = settings
-        self.info = DeviceInfo(
-            sn=settings.sn,
-            domain=settings.product.domain,
-            type=settings.product.type,
-            sub_type=settings.product.sub_type,
-            thing_version=settings.product.thing_version,
-            payload_index=settings.payload_index,
-        )
+        self.info = DeviceInfo.of(settings.sn, settings.product, settings.payload_index)
         self._now = now
         self._control: ControlChannel = settings.control.channel()
         self._decoder = Decoder(settings.max_data_len)

@@ -82,14 +82,7 @@ class _Pending:
 class GimbalAdapter(Adapter):
     def __init__(self, settings: RsdkDeviceSettings, *, now: Callable[[], float] = time.monotonic) -> None:
         self.settings = settings
-        self.info = DeviceInfo(
-            sn=settings.sn,
-            domain=settings.product.domain,
-            type=settings.product.type,
-            sub_type=settings.product.sub_type,
-            thing_version=settings.product.thing_version,
-            payload_index=settings.payload_index,
-        )
+        self.info = DeviceInfo.of(settings.sn, settings.product, settings.payload_index)
         self._now = now
         self._link: CanLink | None = None
         self._rx = Reassembler(rx_id=settings.rx_id)
