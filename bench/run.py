@@ -113,6 +113,7 @@ SUITES: list[tuple[str, Suite]] = [
     ("drc", _lazy("bench.drc")),
     ("scale", _lazy("bench.scale")),
     ("fleet", _lazy("bench.fleet")),
+    ("restarts", _lazy("bench.restarts")),
     ("soak", _lazy("bench.soak")),
 ]
 

@@ -109,6 +109,7 @@ class GatewayApp:
             metrics=self.metrics,
             on_connected=lambda: northbound_holder["nb"].on_connected(),
             inline=lambda t, p: northbound_holder["drc"].inline_main(t, p),
+            on_disconnected=lambda reason: northbound_holder["drc"].main_link_lost(reason),
         )
         self.northbound = Northbound(
             settings=s,

@@ -208,8 +208,14 @@ class DrcController:
         self.publish_event("drc_status_notify", {"result": int(result), "drc_state": state}, True)
         self.publish_gateway_osd({"drc_state": state})
 
+    def main_link_lost(self, reason: str) -> None:
+        """The main connection dropped (its network thread). A session riding it has lost its DRC broker just
+        as a dedicated one would; a session on a dedicated broker is not concerned."""
+        if self.active and self._bridge is None:
+            self._link_lost(reason)
+
     def _link_lost(self, reason: str) -> None:
-        """The dedicated DRC connection dropped (network thread): stop at once, then end the session."""
+        """The DRC connection dropped (network thread): stop at once, then end the session."""
         if not self.active:
             return
         self._stop_motion_now()

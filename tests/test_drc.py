@@ -240,6 +240,45 @@ def test_drc_broker_killed_stops_motion_and_ends_the_session(rig: dict[str, Any]
     )
 
 
+def test_main_broker_killed_does_not_disturb_a_dedicated_drc_link(
+    private_broker: LocalBroker, drc_broker: LocalBroker, can_channel: str
+) -> None:
+    """The cloud's broker crashes while the operator flies over a dedicated DRC broker: the live link goes
+    on (heartbeats echoed, sticks obeyed, no failsafe), and the gateway is back on the main broker after."""
+    sim = GimbalCanSim(interface="virtual", channel=can_channel).start()
+    device = {"type": "rsdk", "sn": "RSDK-DRC-3", "interface": "virtual", "channel": can_channel,
+              "drc_drive": True}  # fmt: skip
+    settings = gateway_settings(private_broker.port, [device], drc={"heartbeat_timeout": 1.0})
+    cloud = CloudClient(private_broker.host, private_broker.port, GW)
+    gw = GatewayThread(settings).start()
+    drc: DrcClient | None = None
+    try:
+        cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1)
+        assert cloud.service("payload_authority_grab", {"payload_index": PI})["data"]["result"] == 0
+        assert _enter(cloud, drc_broker)["data"]["result"] == 0
+        drc = DrcClient(drc_broker.port, DRC_USER, DRC_PASSWORD)
+        private_broker.stop(kill=True)
+        wait_until(lambda: not gw.app.bridge.connected, 5, what="main link down")
+        for seq in range(1, 31):  # 1.5 s of sticks at 20 Hz with heartbeats, all during the outage
+            drc.send("drone_control", {"seq": seq, "w": 30.0 + seq % 2})
+            if seq % 5 == 0:
+                drc.send("heart_beat", {"seq": seq, "timestamp": seq})
+            time.sleep(0.05)
+        wait_until(lambda: drc.count("heart_beat") == 6, 3, what="every heartbeat echoed in the outage")
+        assert sim.model.yaw.speed in (30.0, 31.0)
+        assert gw.app.drc.active
+        assert gw.app.metrics.count("drc_failsafe_stops_total") == 0
+        private_broker.start()
+        wait_until(lambda: gw.app.bridge.subscribed, 10, what="main link back")
+        assert gw.app.drc.active
+    finally:
+        if drc is not None:
+            drc.close()
+        gw.stop()
+        cloud.close()
+        sim.stop()
+
+
 def test_enter_refusals(rig: dict[str, Any]) -> None:
     cloud, drc_broker = rig["cloud"], rig["drc_broker"]
     expired = _enter(cloud, drc_broker, expire_time=int(time.time()) - 10)

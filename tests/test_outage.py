@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import os
 import threading
 import time
 import uuid
@@ -167,6 +168,144 @@ def test_requests_across_broker_kills_are_answered_and_acted_on_once(can_channel
         assert sim.model.photos == len(tids)  # never acted on twice
         assert gw.app.metrics.count("mqtt_connects_total") >= 2
     finally:
+        gw.stop()
+        cloud.close()
+        sim.stop()
+        broker.stop()
+
+
+class _Sticks:
+    """The cloud's live-control side on the main broker: sticks at 20 Hz, heartbeats at 5 Hz, whatever the
+    broker's state (publishes while it is down are simply lost, as on a real link)."""
+
+    def __init__(self, client: paho.Client, yaw_rate: float) -> None:
+        self.client, self.yaw_rate = client, yaw_rate
+        self.seq = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="test-sticks", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        down = f"thing/product/{GW}/drc/down"
+        n = 0
+        while not self._stop.wait(0.05):
+            n += 1
+            self.seq += 1
+            body = {"method": "drone_control", "data": {"seq": self.seq, "w": self.yaw_rate}}
+            self.client.publish(down, json.dumps(body), qos=0)
+            if n % 4 == 0:
+                beat = {"method": "heart_beat", "data": {"seq": self.seq, "timestamp": self.seq}}
+                self.client.publish(down, json.dumps(beat), qos=0)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2)
+
+
+def _echoed_after(cloud: PersistentCloud, seq: int) -> bool:
+    return bool(cloud.find("drc/up", lambda b: b["method"] == "heart_beat" and b["data"]["seq"] > seq))
+
+
+def _open_fds() -> int:
+    return len(os.listdir("/proc/self/fd"))
+
+
+def test_broker_kills_with_services_and_drc_in_flight(can_channel: str) -> None:
+    """The broker crashes three times while the cloud drives the gimbal over DRC (on the main broker) and
+    asks for photos. Each crash stops the motion at once and ends the DRC session (514303, delivered once
+    the broker is back); the cloud enters again. Every request is answered, none is acted on twice, and
+    nothing accumulates in the gateway across the restarts (threads, sockets, pending work)."""
+    broker = LocalBroker(persistence=True).start()
+    sim = GimbalCanSim(interface="virtual", channel=can_channel).start()
+    device = {"type": "rsdk", "sn": "RSDK-OUT-2", "interface": "virtual", "channel": can_channel,
+              "drc_drive": True}  # fmt: skip
+    settings = gateway_settings(broker.port, [device], gateway_sn=GW)
+    cloud = PersistentCloud(broker.port)
+    gw = GatewayThread(settings).start()
+    sticks: _Sticks | None = None
+    photo_tids: list[str] = []
+
+    def request(tid: str, method: str, data: dict[str, Any]) -> None:
+        body = {"tid": tid, "bid": "b", "timestamp": 0, "method": method, "data": data}
+        cloud.client.publish(f"thing/product/{GW}/services", json.dumps(body), qos=1)
+
+    def replies(tid: str) -> list[dict[str, Any]]:
+        return cloud.find("services_reply", lambda b: b["tid"] == tid)
+
+    def call(tid: str, method: str, data: dict[str, Any]) -> dict[str, Any]:
+        """Send, re-sending after 3 s while unanswered (the reference cloud's rule)."""
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            request(tid, method, data)
+            try:
+                wait_until(lambda: bool(replies(tid)), 3, what=f"reply to {tid}")
+            except AssertionError:
+                continue
+            return replies(tid)[0]
+        raise AssertionError(f"{method} {tid} never answered")
+
+    def link_lost_events() -> set[str]:
+        return {
+            e["tid"]
+            for e in cloud.find("/events", lambda b: b["method"] == "drc_status_notify")
+            if e["data"] == {"result": 514303, "drc_state": 0}
+        }
+
+    main_broker = {"address": f"127.0.0.1:{broker.port}", "client_id": "x", "username": "", "password": "",
+                   "expire_time": 0, "enable_tls": False}  # fmt: skip
+    try:
+        wait_until(lambda: gw.app.devices.by_sn("RSDK-OUT-2").online, 10, what="gimbal online")
+        assert call("grab", "payload_authority_grab", {"payload_index": "1001-0-0"})["data"]["result"] == 0
+        time.sleep(1.2)  # the broker's autosave (1 s) has both sessions on disk before the first crash
+        sticks = _Sticks(cloud.client, yaw_rate=20.0)
+        baseline: tuple[set[str], int] | None = None
+        for cycle in range(3):
+            enter = {"mqtt_broker": main_broker, "osd_frequency": 5, "hsi_frequency": 1}
+            assert call(f"enter-{cycle}", "drc_mode_enter", enter)["data"]["result"] == 0
+            wait_until(lambda: sim.model.yaw.speed == 20.0, 5, what=f"driven over DRC (cycle {cycle})")
+            wait_until(lambda n=sticks.seq: _echoed_after(cloud, n), 5, what="heartbeats echoed")
+            if baseline is None:  # after one full cycle's start-up: what the gateway holds in steady state
+                baseline = ({t.name for t in threading.enumerate()}, _open_fds())
+            for i in range(5):
+                tid = f"photo-{cycle}-{i}"
+                photo_tids.append(tid)
+                request(tid, "camera_photo_take", {"payload_index": "1001-0-0"})
+                time.sleep(0.02)
+            broker.stop(kill=True)  # a crash with sticks, heartbeats and requests in flight
+            wait_until(lambda: sim.model.yaw.speed == 0.0, 3, what="motion stopped when the broker died")
+            wait_until(lambda: not gw.app.drc.active, 3, what="DRC session ended")
+            time.sleep(0.5)
+            broker.start()
+            wait_until(
+                lambda n=cycle + 1: len(link_lost_events()) == n, 20, what="514303 delivered after restart"
+            )
+            assert sim.model.yaw.speed == 0.0  # sticks that arrive after the crash drive nothing
+        deadline = time.monotonic() + 30
+        answered = lambda: {r["tid"] for r in cloud.find("services_reply")}  # noqa: E731
+        while not answered() >= set(photo_tids) and time.monotonic() < deadline:
+            for tid in sorted(set(photo_tids) - answered()):
+                request(tid, "camera_photo_take", {"payload_index": "1001-0-0"})
+            time.sleep(3.0)
+        assert answered() >= set(photo_tids), f"unanswered: {sorted(set(photo_tids) - answered())}"
+        for tid in photo_tids:
+            assert all(r["data"] == {"result": 0} for r in replies(tid)), replies(tid)
+        assert sim.model.photos == len(photo_tids)  # never acted on twice
+        assert gw.app.metrics.count("mqtt_connects_total") >= 4
+        # the failsafe counted one link-lost stop per crash
+        assert gw.app.metrics.count("drc_failsafe_stops_total") >= 3
+        # nothing accumulates across restarts: the same threads and sockets as in the first session's steady
+        # state, no request still pending, no event still waiting for its reply
+        sticks.close()
+        sticks = None
+        assert baseline is not None
+        wait_until(lambda: gw.app.dispatcher.in_flight == 0, 5, what="no request pending")
+        wait_until(lambda: not gw.app.northbound._events, 10, what="every event acknowledged")
+        threads, fds = baseline
+        assert {t.name for t in threading.enumerate()} <= threads | {"test-sticks"}
+        assert _open_fds() <= fds
+    finally:
+        if sticks is not None:
+            sticks.close()
         gw.stop()
         cloud.close()
         sim.stop()
