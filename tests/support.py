@@ -9,14 +9,14 @@ import threading
 import time
 import uuid
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import can
 import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion
 
-from adapters.base import Adapter
+from adapters.base import Adapter, CallResult, DeviceInfo, Handler, TelemetrySink
 from adapters.rsdk.can import HOST_TX_ID, Reassembler
 from adapters.rsdk.commands import decode_message
 from adapters.rsdk.protocol import Frame
@@ -286,3 +286,42 @@ class BusSniffer:
         self._stop.set()
         self._thread.join(2)
         self.bus.shutdown()
+
+
+class FakeAdapter(Adapter):
+    """A device with no wire, for tests of the layers above the adapters (dispatcher, service):
+    always online, each method answered by the coroutine the test gives. Subclass it for a fake
+    that keeps state (calls counted, answers held back)."""
+
+    def __init__(
+        self,
+        sn: str,
+        payload_index: str,
+        handlers: Mapping[str, Handler],
+        *,
+        osd: Mapping[str, Any] | None = None,
+    ) -> None:
+        self.info = DeviceInfo(sn=sn, domain="1", type=1001, sub_type=0, payload_index=payload_index)
+        self.handlers = dict(handlers)
+        self._osd = osd
+
+    @staticmethod
+    async def ok(data: Any) -> CallResult:
+        """A method the fake device does at once."""
+        return CallResult()
+
+    @property
+    def online(self) -> bool:
+        return True
+
+    async def start(self, sink: TelemetrySink) -> None:
+        sink.online_changed(self.info.sn, True)
+
+    async def stop(self) -> None:
+        return None
+
+    async def stop_motion(self) -> None:
+        return None
+
+    def osd_snapshot(self) -> Mapping[str, Any] | None:
+        return self._osd

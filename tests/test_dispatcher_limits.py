@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import asyncio
 import json
-from collections.abc import Mapping
 from typing import Any
 
-from adapters.base import Adapter, CallResult, DeviceInfo, TelemetrySink
+from adapters.base import CallResult
 from gateway.app import build_registry
 from gateway.clock import ManualClock, SystemClock
 from gateway.devices import DeviceTable
@@ -16,41 +15,22 @@ from gateway.dispatcher import Dispatcher
 from gateway.metrics import Metrics
 from gateway.settings import DispatcherSettings
 from schemas import TopicKind, topic
+from tests.support import FakeAdapter
 
 GW = "GW-LIMITS-1"
 
 
-class SlowAdapter(Adapter):
+class SlowAdapter(FakeAdapter):
     """Answers camera_photo_take only when released; camera_mode_switch at once."""
 
     def __init__(self) -> None:
-        self.info = DeviceInfo(sn="SLOW-1", domain="1", type=1001, sub_type=0, payload_index="39-0-7")
+        super().__init__("SLOW-1", "39-0-7", {"camera_photo_take": self._slow, "camera_mode_switch": self.ok})
         self.release = asyncio.Event()
         self.calls = 0
-        self.handlers = {"camera_photo_take": self._slow, "camera_mode_switch": self._fast}
-
-    @property
-    def online(self) -> bool:
-        return True
-
-    async def start(self, sink: TelemetrySink) -> None:
-        return None
-
-    async def stop(self) -> None:
-        return None
-
-    async def stop_motion(self) -> None:
-        return None
-
-    def osd_snapshot(self) -> Mapping[str, Any] | None:
-        return None
 
     async def _slow(self, data: Any) -> CallResult:
         self.calls += 1
         await self.release.wait()
-        return CallResult()
-
-    async def _fast(self, data: Any) -> CallResult:
         return CallResult()
 
 

@@ -10,13 +10,10 @@ from __future__ import annotations
 import asyncio
 import json
 import re
-from collections.abc import Mapping
-from typing import Any
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.base import Adapter, CallResult, DeviceInfo, TelemetrySink
 from gateway.clock import SystemClock
 from gateway.devices import DeviceTable
 from gateway.dispatcher import Dispatcher
@@ -25,37 +22,18 @@ from gateway.settings import DispatcherSettings
 from schemas import TopicKind, subscriptions, topic
 from schemas.examples import SEED_003
 from tests import fuzz_stats
+from tests.support import FakeAdapter
 
 GW = "GW-FUZZ-1"
 
 
-class EchoAdapter(Adapter):
+class EchoAdapter(FakeAdapter):
     """A device that does every camera/gimbal method at once (the dispatcher is what is fuzzed)."""
 
     def __init__(self) -> None:
-        self.info = DeviceInfo(sn="FUZZ-DEV", domain="1", type=1001, sub_type=0, payload_index="39-0-7")
         methods = ("camera_photo_take", "camera_aim", "camera_screen_drag", "gimbal_reset",
                    "camera_mode_switch", "camera_recording_start", "camera_recording_stop")  # fmt: skip
-        self.handlers = {m: self._ok for m in methods}
-
-    @property
-    def online(self) -> bool:
-        return True
-
-    async def start(self, sink: TelemetrySink) -> None:
-        return None
-
-    async def stop(self) -> None:
-        return None
-
-    async def stop_motion(self) -> None:
-        return None
-
-    def osd_snapshot(self) -> Mapping[str, Any] | None:
-        return None
-
-    async def _ok(self, data: Any) -> CallResult:
-        return CallResult()
+        super().__init__("FUZZ-DEV", "39-0-7", {m: self.ok for m in methods})
 
 
 class Recorder:

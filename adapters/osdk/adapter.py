@@ -42,7 +42,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from adapters.base import (
-    Adapter,
     CallResult,
     DeviceInfo,
     DeviceNotConnected,
@@ -62,6 +61,7 @@ from adapters.osdk.protocol import (
     SessionTable,
 )
 from adapters.serial_link import LinkError, SerialLink
+from adapters.supervision import SupervisedAdapter
 from adapters.wire.layout import LayoutError
 from adapters.wire.stream import BadFrame
 from schemas.results import ResultCode, ground_station_ack
@@ -128,23 +128,22 @@ def _quat_to_euler(w: float, x: float, y: float, z: float) -> tuple[float, float
     return (math.degrees(roll), math.degrees(pitch), math.degrees(yaw))
 
 
-class AircraftAdapter(Adapter):
+class AircraftAdapter(SupervisedAdapter):
+    noun = "aircraft"
+    link_error = LinkError
+    _log = log
+    _link: SerialLink | None
+
     def __init__(self, settings: OsdkDeviceSettings, *, now: Callable[[], float] = time.monotonic) -> None:
         self.settings = settings
         self.fw = settings.firmware
-        self.info = DeviceInfo.of(settings.sn, settings.product)
+        super().__init__(DeviceInfo.of(settings.sn, settings.product), settings, now)
         self.deadline = settings.deadline
-        self._now = now
-        self._link: SerialLink | None = None
         self._decoder = Decoder()
         self._sessions = SessionTable()
         self._dups = DuplicateFilter()
-        self._sink: TelemetrySink | None = None
-        self._tasks: list[asyncio.Task[None]] = []
-        self._stopping = False
-        self._online = False
-        self._last_heard = float("-inf")
         self.activated = False
+        self._next_activation = 0.0  # when an unactivated FC is next asked (version, activation, rates)
         self.version: str | None = None
         self.activation_error: str | None = None
         self.telemetry = Telemetry()
@@ -161,10 +160,6 @@ class AircraftAdapter(Adapter):
         }
 
     # -- life cycle -------------------------------------------------------------------------------
-    @property
-    def online(self) -> bool:
-        return self._online
-
     async def start(self, sink: TelemetrySink) -> None:
         self._sink = sink
         loop = asyncio.get_running_loop()
@@ -189,15 +184,7 @@ class AircraftAdapter(Adapter):
         if self.settings.release_on_stop and self.has_control and self._link is not None and self._link.up:
             with contextlib.suppress(Exception):
                 await asyncio.wait_for(self.command("obtain_control", {"control": 0}), 1.0)
-        for task in [*self._tasks, self._mission_task]:
-            if task is not None:
-                task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
-        await asyncio.sleep(0.05)  # let the writer thread flush the last frames
-        if self._link is not None:
-            self._link.close()
+        await self._end_supervision(self._mission_task)
         self._fail_pending(DeviceNotConnected(f"aircraft {self.info.sn} adapter stopped"))
 
     async def stop_motion(self) -> None:
@@ -243,35 +230,25 @@ class AircraftAdapter(Adapter):
         self.emergency_brake()
         self.send_movement(0.0, 0.0, 0.0, 0.0)
 
-    # -- link supervision -------------------------------------------------------------------------
-    async def _supervise(self) -> None:
-        s = self.settings
-        next_activation = 0.0
-        while not self._stopping:
-            link = self._link
-            assert link is not None
-            if not link.up:
-                try:
-                    await link.open()
-                    self._decoder.reset()
-                    self._dups.reset()
-                    self.activated = False
-                    next_activation = 0.0
-                except LinkError as exc:
-                    log.info("aircraft %s: %s; retrying in %.1fs", self.info.sn, exc, s.reopen_interval)
-                    self._set_online(False)
-                    await asyncio.sleep(s.reopen_interval)
-                    continue
-            now = self._now()
-            if not self.activated and now >= next_activation:
-                next_activation = now + 3.0
-                await self._activate()
-            if self._online and now - self._last_heard > s.silence_timeout:
-                log.warning("aircraft %s silent for %.1fs: offline", self.info.sn, now - self._last_heard)
-                self._set_online(False)
-                self.activated = False
-                next_activation = now
-            await asyncio.sleep(0.1)
+    # -- link supervision (the loop is SupervisedAdapter's) ----------------------------------------
+    def _on_link_opened(self) -> None:
+        self._decoder.reset()
+        self._dups.reset()  # a frame on the new link is no resend of one on the old, whatever its seq
+        self.activated = False
+        self._next_activation = 0.0
+
+    async def _supervise_tick(self, now: float) -> None:
+        """Activate first (the FC stays offline until activated, and answers nothing else before),
+        retrying every 3 s; then the silence check."""
+        if not self.activated and now >= self._next_activation:
+            self._next_activation = now + 3.0
+            await self._activate()
+        self._check_silence(now)
+
+    def _on_went_silent(self, now: float) -> None:
+        # a silent FC may have restarted, which forgets the activation: redo it on the next pass
+        self.activated = False
+        self._next_activation = now
 
     async def _activate(self) -> None:
         """Version, activation, broadcast rates: the FC ignores other command sets until activated."""
@@ -315,16 +292,9 @@ class AircraftAdapter(Adapter):
             await asyncio.sleep(0.02)
 
     def _on_link_down(self, reason: str) -> None:
-        self._set_online(False)
+        super()._on_link_down(reason)
         self.activated = False
         self._fail_pending(DeviceNotConnected(f"aircraft {self.info.sn} serial link down"))
-
-    def _set_online(self, online: bool) -> None:
-        if online == self._online:
-            return
-        self._online = online
-        if self._sink is not None:
-            self._sink.online_changed(self.info.sn, online)
 
     def _fail_pending(self, exc: Exception) -> None:
         for p in self._sessions.clear():

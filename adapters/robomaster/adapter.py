@@ -55,7 +55,6 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from adapters.base import (
-    Adapter,
     CallResult,
     DeviceInfo,
     DeviceNotConnected,
@@ -72,6 +71,7 @@ from adapters.robomaster.commands import (
 from adapters.robomaster.config import RobomasterDeviceSettings
 from adapters.robomaster.protocol import Decoder, Frame
 from adapters.serial_link import LinkError, SerialLink
+from adapters.supervision import SupervisedAdapter
 from schemas.results import ResultCode
 
 log = logging.getLogger(__name__)
@@ -104,24 +104,21 @@ def _wrap180(deg: float) -> float:
     return (deg + 180.0) % 360.0 - 180.0
 
 
-class RobotAdapter(Adapter):
+class RobotAdapter(SupervisedAdapter):
+    noun = "robot"
+    link_error = LinkError
+    _log = log
+    _link: SerialLink | None
+
     def __init__(
         self, settings: RobomasterDeviceSettings, *, now: Callable[[], float] = time.monotonic
     ) -> None:
         self.settings = settings
-        self.info = DeviceInfo.of(settings.sn, settings.product, settings.payload_index)
-        self._now = now
+        super().__init__(DeviceInfo.of(settings.sn, settings.product, settings.payload_index), settings, now)
         self._control: ControlChannel = settings.control.channel()
         self._decoder = Decoder(settings.max_data_len)
-        self._link: SerialLink | None = None
-        self._sink: TelemetrySink | None = None
-        self._tasks: list[asyncio.Task[None]] = []
         self._seq = 0
-        self._online = False
-        self._stopping = False
-        self._last_heard = float("-inf")
-        # link statistics (tests and metrics read them)
-        self.link_opens = 0
+        # link statistics (tests and metrics read them, with ``link_opens``)
         self.frames_in = 0
         self.bad_frames = 0
         self.undecodable = 0
@@ -167,10 +164,6 @@ class RobotAdapter(Adapter):
             self.handlers["gimbal_reset"] = self._gimbal_reset
 
     # -- life cycle -------------------------------------------------------------------------------
-    @property
-    def online(self) -> bool:
-        return self._online
-
     async def start(self, sink: TelemetrySink) -> None:
         self._sink = sink
         loop = self._loop = asyncio.get_running_loop()
@@ -186,14 +179,7 @@ class RobotAdapter(Adapter):
     async def stop(self) -> None:
         self._stopping = True
         self._halt(STOP_SHUTDOWN)
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
-        await asyncio.sleep(0.05)  # let the writer thread put the stop frame on the wire
-        if self._link is not None:
-            self._link.close()
+        await self._end_supervision()
 
     async def stop_motion(self, reason: int = STOP_WATCHDOG) -> None:
         """Failsafe: end every motion loop and send ``stop`` at once; nothing is awaited."""
@@ -218,43 +204,15 @@ class RobotAdapter(Adapter):
                 task.cancel()
         self._velocity_task = self._drag_task = None
 
-    # -- link supervision -------------------------------------------------------------------------
-    async def _supervise(self) -> None:
-        """Keep the port open and the online flag honest (valid frames within silence_timeout)."""
-        s = self.settings
-        while not self._stopping:
-            link = self._link
-            assert link is not None
-            if not link.up:
-                try:
-                    await link.open()
-                except LinkError as exc:
-                    log.info("robot %s: %s; retrying in %.1fs", self.info.sn, exc, s.reopen_interval)
-                    self._set_online(False)
-                    await asyncio.sleep(s.reopen_interval)
-                    continue
-                self.link_opens += 1
-                self._decoder = Decoder(s.max_data_len)
-            if self._online and self._now() - self._last_heard > s.silence_timeout:
-                log.warning(
-                    "robot %s silent for %.1fs: offline", self.info.sn, self._now() - self._last_heard
-                )
-                self._set_online(False)
-            await asyncio.sleep(0.1)
+    # -- link supervision (the loop is SupervisedAdapter's) ----------------------------------------
+    def _on_link_opened(self) -> None:
+        self._decoder = Decoder(self.settings.max_data_len)
 
-    def _on_link_down(self, reason: str) -> None:
-        self._set_online(False)
-
-    def _set_online(self, online: bool) -> None:
-        if online == self._online:
-            return
-        self._online = online
+    def _on_online_changed(self, online: bool) -> None:
         if not online:
             # the board may still listen (only the referee feed stopped): ask it to stop, best effort
             self._halt(STOP_WATCHDOG)
             self._published_state = {}  # everything is news again when it comes back
-        if self._sink is not None:
-            self._sink.online_changed(self.info.sn, online)
 
     # -- receive ---------------------------------------------------------------------------------
     def _on_bytes(self, data: bytes) -> None:

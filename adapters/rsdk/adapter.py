@@ -43,7 +43,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from adapters.base import (
-    Adapter,
     CallResult,
     DeviceInfo,
     DeviceNotConnected,
@@ -58,6 +57,7 @@ from adapters.rsdk.commands import CommandError, Message, build_frame, decode_me
 from adapters.rsdk.config import RsdkDeviceSettings
 from adapters.rsdk.link import CanLink, LinkError
 from adapters.rsdk.protocol import Frame, encode
+from adapters.supervision import SupervisedAdapter
 from schemas.results import ResultCode
 
 log = logging.getLogger(__name__)
@@ -79,20 +79,19 @@ class _Pending:
     name: str
 
 
-class GimbalAdapter(Adapter):
+class GimbalAdapter(SupervisedAdapter):
+    noun = "gimbal"
+    link_error = LinkError
+    _log = log
+    _link: CanLink | None
+
     def __init__(self, settings: RsdkDeviceSettings, *, now: Callable[[], float] = time.monotonic) -> None:
         self.settings = settings
-        self.info = DeviceInfo.of(settings.sn, settings.product, settings.payload_index)
-        self._now = now
-        self._link: CanLink | None = None
+        super().__init__(DeviceInfo.of(settings.sn, settings.product, settings.payload_index), settings, now)
         self._rx = Reassembler(rx_id=settings.rx_id)
         self._seq = 0
         self._pending: dict[int, _Pending] = {}
-        self._sink: TelemetrySink | None = None
-        self._tasks: list[asyncio.Task[None]] = []
-        self._last_heard = float("-inf")
-        self._online = False
-        self._stopping = False
+        self._next_poll = 0.0  # when an offline gimbal is next asked to (re-)enable its push
         # what the gimbal told us (wire units converted to degrees)
         self.attitude: tuple[float, float, float] | None = None  # yaw, roll, pitch
         self.joints: tuple[float, float, float] | None = None
@@ -128,10 +127,6 @@ class GimbalAdapter(Adapter):
         }
 
     # -- life cycle -------------------------------------------------------------------------------
-    @property
-    def online(self) -> bool:
-        return self._online
-
     async def start(self, sink: TelemetrySink) -> None:
         self._sink = sink
         loop = asyncio.get_running_loop()
@@ -152,15 +147,7 @@ class GimbalAdapter(Adapter):
         self._stopping = True
         with contextlib.suppress(Exception):
             await self.stop_motion()
-        for task in [*self._tasks, self._drag_task]:
-            if task is not None:
-                task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
-        await asyncio.sleep(0.05)  # let the sender thread put the stop frames on the bus
-        if self._link is not None:
-            self._link.close()
+        await self._end_supervision(self._drag_task)
         self._fail_pending(DeviceNotConnected(f"gimbal {self.info.sn} adapter stopped"))
 
     async def stop_motion(self) -> None:
@@ -197,49 +184,31 @@ class GimbalAdapter(Adapter):
                     "speed_control", {"yaw_speed": 0, "roll_speed": 0, "pitch_speed": 0, "ctrl_byte": ctrl}
                 )
 
-    # -- link supervision -------------------------------------------------------------------------
-    async def _supervise(self) -> None:
-        """Keep the link open, the push enabled, and the online flag honest."""
-        s = self.settings
-        next_poll = 0.0
-        while not self._stopping:
-            link = self._link
-            assert link is not None
-            if not link.up:
-                try:
-                    await link.open()
-                    self._rx.reset()
-                    next_poll = 0.0
-                except LinkError as exc:
-                    log.info("gimbal %s: %s; retrying in %.1fs", self.info.sn, exc, s.reopen_interval)
-                    self._set_online(False)
-                    await asyncio.sleep(s.reopen_interval)
-                    continue
-            now = self._now()
-            if self._online and now - self._last_heard > s.silence_timeout:
-                log.warning("gimbal %s silent for %.1fs: offline", self.info.sn, now - self._last_heard)
-                self._set_online(False)
-                self._fail_pending(DeviceNotConnected(f"gimbal {self.info.sn} went silent"))
-            if not self._online and now >= next_poll:
-                # (re-)enable the push: a gimbal that restarted has it off; its reply brings us online
-                next_poll = now + min(1.0, s.silence_timeout / 2)
-                with contextlib.suppress(LinkError, CommandError):
-                    self._send_no_reply("push_settings", {"ctrl_byte": 0x01}, want_reply=True)
-                    self._send_no_reply("get_version", {"device_id": SDK_DEVICE_ID}, want_reply=True)
-            await asyncio.sleep(0.1)
+    # -- link supervision (the loop is SupervisedAdapter's) ----------------------------------------
+    def _on_link_opened(self) -> None:
+        self._rx.reset()
+        self._next_poll = 0.0
+
+    async def _supervise_tick(self, now: float) -> None:
+        """Silence first, so a gimbal found silent is asked for its push in the same pass."""
+        self._check_silence(now)
+        if not self._online and now >= self._next_poll:
+            # (re-)enable the push: a gimbal that restarted has it off; its reply brings us online
+            self._next_poll = now + min(1.0, self.settings.silence_timeout / 2)
+            with contextlib.suppress(LinkError, CommandError):
+                self._send_no_reply("push_settings", {"ctrl_byte": 0x01}, want_reply=True)
+                self._send_no_reply("get_version", {"device_id": SDK_DEVICE_ID}, want_reply=True)
+
+    def _on_went_silent(self, now: float) -> None:
+        self._fail_pending(DeviceNotConnected(f"gimbal {self.info.sn} went silent"))
 
     def _on_link_down(self, reason: str) -> None:
-        self._set_online(False)
+        super()._on_link_down(reason)
         self._fail_pending(DeviceNotConnected(f"gimbal {self.info.sn} CAN link down"))
 
-    def _set_online(self, online: bool) -> None:
-        if online == self._online:
-            return
-        self._online = online
+    def _on_online_changed(self, online: bool) -> None:
         if not online:
-            self._drag_until = float("-inf")
-        if self._sink is not None:
-            self._sink.online_changed(self.info.sn, online)
+            self._drag_until = float("-inf")  # a drag in progress stops and releases at its next wake-up
 
     def _fail_pending(self, exc: Exception) -> None:
         pending, self._pending = self._pending, {}

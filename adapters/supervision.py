@@ -1,0 +1,156 @@
+"""Link supervision shared by the device adapters: keep the link open and the online flag honest.
+
+Every family has one link (a CAN bus, a serial port) that fails and comes back, and a device that
+may fall silent while its link stays up. The rules are the same for all of them: reopen a closed
+link every ``reopen_interval`` (absent hardware is not an error), call the device offline after
+``silence_timeout`` without a valid frame, and report each change of the online flag once through
+:meth:`~adapters.base.TelemetrySink.online_changed`. :class:`SupervisedAdapter` owns that loop
+and that flag, so they cannot drift apart between families; a family says only what differs
+through the hooks (``_on_link_opened``, ``_supervise_tick``, ``_on_went_silent``,
+``_on_online_changed``). Knows nothing of any wire protocol, codec or Cloud API method.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Callable
+from typing import ClassVar, Protocol
+
+from adapters.base import Adapter, DeviceInfo, TelemetrySink
+
+__all__ = ["SupervisedAdapter", "SupervisedLink", "SupervisionTiming"]
+
+
+class SupervisedLink(Protocol):
+    """What supervision needs of a link (``CanLink``, ``SerialLink``)."""
+
+    @property
+    def up(self) -> bool: ...
+
+    async def open(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class SupervisionTiming(Protocol):
+    """The two timing settings every family's device settings carry (seconds)."""
+
+    @property
+    def reopen_interval(self) -> float: ...
+
+    @property
+    def silence_timeout(self) -> float: ...
+
+
+class SupervisedAdapter(Adapter):
+    """An adapter whose device sits behind one link that fails and comes back.
+
+    A subclass sets :attr:`noun`, :attr:`link_error` and :attr:`_log`, builds ``self._link`` in
+    ``start()`` (with :meth:`_on_link_down` as its ``on_down``), starts :meth:`_supervise` as a task
+    in ``self._tasks``, stamps ``self._last_heard`` and calls ``_set_online(True)`` when a frame
+    arrives, and ends with :meth:`_end_supervision` in ``stop()``.
+    """
+
+    #: how log lines name the device ("gimbal", "aircraft", "robot")
+    noun: ClassVar[str]
+    #: what the family's link raises when it cannot open (each link module has its own)
+    link_error: ClassVar[type[Exception]]
+    #: the family module's logger, so supervision's log lines keep the family's logger name
+    _log: ClassVar[logging.Logger]
+
+    _link: SupervisedLink | None
+
+    def __init__(self, info: DeviceInfo, timing: SupervisionTiming, now: Callable[[], float]) -> None:
+        self.info = info
+        self._timing = timing
+        self._now = now
+        self._link = None
+        self._sink: TelemetrySink | None = None
+        self._tasks: list[asyncio.Task[None]] = []
+        self._online = False
+        self._stopping = False
+        self._last_heard = float("-inf")  # when the device last sent a valid frame (``now`` clock)
+        self.link_opens = 0  # successful opens by the supervisor: the first one and every reopen
+
+    @property
+    def online(self) -> bool:
+        return self._online
+
+    # -- the loop ---------------------------------------------------------------------------------
+    async def _supervise(self) -> None:
+        """Keep the link open (a failed open is retried every ``reopen_interval``, the device
+        offline meanwhile) and, every 0.1 s while it is up, run :meth:`_supervise_tick`."""
+        timing = self._timing
+        while not self._stopping:
+            link = self._link
+            assert link is not None
+            if not link.up:
+                try:
+                    await link.open()
+                except self.link_error as exc:
+                    self._log.info(
+                        "%s %s: %s; retrying in %.1fs", self.noun, self.info.sn, exc, timing.reopen_interval
+                    )
+                    self._set_online(False)
+                    await asyncio.sleep(timing.reopen_interval)
+                    continue
+                self.link_opens += 1
+                self._on_link_opened()
+            await self._supervise_tick(self._now())
+            await asyncio.sleep(0.1)
+
+    async def _supervise_tick(self, now: float) -> None:
+        """One pass of the loop with the link up. A family that does more on each pass overrides
+        this and calls :meth:`_check_silence` where its order of effects wants it."""
+        self._check_silence(now)
+
+    def _check_silence(self, now: float) -> None:
+        """Offline once the device has said nothing for ``silence_timeout``: the link can stay up
+        while the device behind it has restarted, lost power or stopped its feed."""
+        silent = now - self._last_heard
+        if self._online and silent > self._timing.silence_timeout:
+            self._log.warning("%s %s silent for %.1fs: offline", self.noun, self.info.sn, silent)
+            self._set_online(False)
+            self._on_went_silent(now)
+
+    def _on_link_down(self, reason: str) -> None:
+        """The link's ``on_down``: offline at once; the loop reopens it. Subclasses extend it
+        (calling this first) to fail what waited on the link."""
+        self._set_online(False)
+
+    def _set_online(self, online: bool) -> None:
+        """Change the flag and tell the sink, once per change (after :meth:`_on_online_changed`)."""
+        if online == self._online:
+            return
+        self._online = online
+        self._on_online_changed(online)
+        if self._sink is not None:
+            self._sink.online_changed(self.info.sn, online)
+
+    # -- hooks ------------------------------------------------------------------------------------
+    def _on_link_opened(self) -> None:
+        """The link has just (re)opened: drop what a decoder half-read from the old one."""
+
+    def _on_went_silent(self, now: float) -> None:
+        """The device has just been marked offline for silence (after the sink heard of it)."""
+
+    def _on_online_changed(self, online: bool) -> None:
+        """The flag has just changed; runs before the sink is told, so a device going offline is
+        stopped before the cloud hears of it."""
+
+    # -- shutdown ---------------------------------------------------------------------------------
+    async def _end_supervision(self, *others: asyncio.Task[None] | None) -> None:
+        """Cancel the adapter's tasks and ``others`` (motion loops, cancelled but not awaited),
+        then close the link once its sender thread has had a moment to put the last frames (the
+        stop the caller just queued) on the wire."""
+        for task in [*self._tasks, *others]:
+            if task is not None:
+                task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        await asyncio.sleep(0.05)
+        if self._link is not None:
+            self._link.close()
