@@ -1,10 +1,14 @@
 """A serial link for the UART device families (Onboard SDK, RoboMaster), thin over pyserial.
 
 Owns one port opened by URL (``/dev/ttyUSB0``, ``/dev/serial/by-id/…``, a pty path,
-``socket://127.0.0.1:PORT``, ``rfc2217://…``), a reader thread that hands received bytes to the
-asyncio loop with ``call_soon_threadsafe``, and a writer thread so a stuck port never blocks the
-loop. pyserial exceptions become :class:`LinkError`; a port that fails (cable unplugged, pty
-closed, socket dropped) is closed and reported once through ``on_down``; the adapter reopens it.
+``socket://127.0.0.1:PORT``, ``rfc2217://…``) and a writer thread, so a stuck port never blocks the
+loop. Reading: a port with a file descriptor (a tty, a pty, ``socket://``) is watched by the asyncio
+loop itself (``add_reader``; pyserial reads it without blocking once its timeout is 0): no thread and
+no cross-thread hand-off per burst, which is what lets one gateway serve hundreds of ports. A port
+without one (``rfc2217://``, ``loop://``) gets a reader thread that hands bytes over with
+``call_soon_threadsafe``. pyserial exceptions become :class:`LinkError`; a port that fails (cable
+unplugged, pty closed, socket dropped) is closed and reported once through ``on_down``; the adapter
+reopens it.
 """
 
 from __future__ import annotations
@@ -13,7 +17,6 @@ import asyncio
 import contextlib
 import logging
 import queue
-import select
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -27,6 +30,20 @@ __all__ = ["LinkError", "SerialLink"]
 
 class LinkError(Exception):
     """The serial link could not be opened or failed while in use."""
+
+
+_READ_ERRORS = (serial.SerialException, OSError, TypeError, AttributeError, ValueError)
+
+
+def _selectable_fd(port: serial.SerialBase) -> int | None:
+    """The port's descriptor, with pyserial's timeout set to 0 so a read takes what is there and returns;
+    None for ports that have none (their reads stay in a thread)."""
+    try:
+        fd = port.fileno()
+        port.timeout = 0
+    except (AttributeError, OSError, ValueError, serial.SerialException):
+        return None
+    return fd if isinstance(fd, int) and fd >= 0 else None
 
 
 class SerialLink:
@@ -47,6 +64,7 @@ class SerialLink:
         self._port: serial.SerialBase | None = None
         self._writeq: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
         self._threads: list[threading.Thread] = []
+        self._fd: int | None = None
         self._up = False
         self._generation = 0
         self.bytes_in = 0
@@ -71,15 +89,21 @@ class SerialLink:
         self._writeq = queue.SimpleQueue()
         self._threads = [
             threading.Thread(
-                target=self._read_loop, args=(port, gen), daemon=True, name=f"serial-rx {self.url}"
-            ),
-            threading.Thread(
                 target=self._write_loop,
                 args=(port, self._writeq, gen),
                 daemon=True,
                 name=f"serial-tx {self.url}",
-            ),
+            )
         ]
+        self._fd = _selectable_fd(port)
+        if self._fd is not None:
+            self._loop.add_reader(self._fd, self._readable, port, gen)
+        else:
+            self._threads.append(
+                threading.Thread(
+                    target=self._read_loop, args=(port, gen), daemon=True, name=f"serial-rx {self.url}"
+                )
+            )
         for t in self._threads:
             t.start()
         self._up = True
@@ -103,44 +127,41 @@ class SerialLink:
         self.frames_out += 1
 
     def close(self) -> None:
+        """Stop reading and hand the port to the writer thread, which sends what is queued and closes it;
+        returns at once (hundreds of links close in parallel, and the loop never waits on a port). Call
+        it from the loop's thread (the adapters do): the loop stops watching the descriptor first, so a
+        reused descriptor number is never mistaken for this port."""
         self._up = False
         self._generation += 1
         self._writeq.put(None)
-        port, self._port = self._port, None
-        if port is not None:
+        self._port = None
+        fd, self._fd = self._fd, None
+        if fd is not None:
             with contextlib.suppress(Exception):
-                port.close()
-        for t in self._threads:
-            if t is not threading.current_thread():
-                t.join(timeout=1.0)
+                self._loop.remove_reader(fd)
         self._threads = []
 
-    # -- threads ----------------------------------------------------------------------------------
-    def _read_loop(self, port: serial.SerialBase, gen: int) -> None:
-        # Wait for the port to be readable, then take everything there in one read: one hand-off to
-        # the loop per burst, not per byte (pyserial's socket:// reports in_waiting as 0 or 1, so
-        # read(in_waiting) crawls byte by byte). Ports without a file descriptor read as before.
+    # -- reading ----------------------------------------------------------------------------------
+    def _readable(self, port: serial.SerialBase, gen: int) -> None:
+        """The loop saw the descriptor readable: take everything there in one read (the timeout is 0)."""
+        if gen != self._generation:
+            return
         try:
-            fd: int | None = port.fileno()
-        except (AttributeError, OSError, ValueError, serial.SerialException):
-            fd = None
-        if fd is not None:
-            try:
-                port.timeout = 0  # once: select() does the waiting, read() takes what is there
-            except (serial.SerialException, OSError, ValueError):
-                fd = None
+            data = port.read(65536)
+            if not data:  # readable but empty: the other end went away
+                raise serial.SerialException("port closed by the device side")
+        except _READ_ERRORS as exc:
+            self._failed(gen, f"read failed: {type(exc).__name__}: {exc}")
+            return
+        self.bytes_in += len(data)
+        self.on_bytes(data)
+
+    def _read_loop(self, port: serial.SerialBase, gen: int) -> None:
+        """Ports without a descriptor: pyserial's own blocking read, in a thread."""
         while gen == self._generation:
             try:
-                if fd is not None:
-                    ready, _, _ = select.select([fd], [], [], 0.1)
-                    if not ready:
-                        continue
-                    data = port.read(65536)
-                    if not data:  # readable but empty: the other end went away
-                        raise serial.SerialException("port closed by the device side")
-                else:
-                    data = port.read(max(1, port.in_waiting or 1))
-            except (serial.SerialException, OSError, TypeError, AttributeError, ValueError) as exc:
+                data = port.read(max(1, port.in_waiting or 1))
+            except _READ_ERRORS as exc:
                 self._from_thread(self._failed, gen, f"read failed: {type(exc).__name__}: {exc}")
                 return
             if data:
@@ -148,16 +169,23 @@ class SerialLink:
                 self._from_thread(self._deliver, gen, data)
 
     def _write_loop(self, port: serial.SerialBase, q: queue.SimpleQueue[bytes | None], gen: int) -> None:
-        while True:
-            data = q.get()
-            if data is None or gen != self._generation:
-                return
-            try:
-                port.write(data)
-                self.bytes_out += len(data)
-            except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
-                self._from_thread(self._failed, gen, f"write failed: {type(exc).__name__}: {exc}")
-                return
+        """Write what is queued, in order, until :meth:`close` (its sentinel comes after every frame queued
+        before it, so a last stop frame still goes out); then close the port here, off the loop: pyserial's
+        socket:// close sleeps 0.3 s, and a tty's may wait for its output to drain."""
+        try:
+            while True:
+                data = q.get()
+                if data is None:
+                    return
+                try:
+                    port.write(data)
+                    self.bytes_out += len(data)
+                except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+                    self._from_thread(self._failed, gen, f"write failed: {type(exc).__name__}: {exc}")
+                    return
+        finally:
+            with contextlib.suppress(Exception):
+                port.close()
 
     def _from_thread(self, fn: Callable[..., None], *args: Any) -> None:
         with contextlib.suppress(RuntimeError):  # the loop closed during shutdown

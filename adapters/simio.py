@@ -21,7 +21,7 @@ from typing import Protocol
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PtyEndpoint", "StreamDevice", "TcpEndpoint"]
+__all__ = ["PtyEndpoint", "StreamDevice", "TcpEndpoint", "TcpFarm"]
 
 
 class StreamDevice(Protocol):
@@ -200,3 +200,105 @@ class TcpEndpoint(_Endpoint):
         self._drop_client()
         with contextlib.suppress(OSError):
             self._server.close()
+
+
+class TcpFarm:
+    """Many simulated devices, each on its own loopback TCP port, served by one thread and one select loop.
+
+    A thread per device (:class:`TcpEndpoint`) is fine for a handful; for hundreds (the scale benchmark,
+    a fleet demo) the threads' wake-ups cost more than the devices themselves. Same contract per device:
+    one client at a time, a reconnecting client replaces the previous one, ticks every ``tick_interval``.
+    """
+
+    def __init__(
+        self, devices: list[StreamDevice], tick_interval: float = 0.05, host: str = "127.0.0.1"
+    ) -> None:
+        self.devices = devices
+        self.tick_interval = tick_interval
+        self._servers: list[socket.socket] = []
+        self._clients: list[socket.socket | None] = [None] * len(devices)
+        for _ in devices:
+            server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            server.bind((host, 0))
+            server.listen(1)
+            server.setblocking(False)
+            self._servers.append(server)
+        self.urls = [f"socket://{host}:{s.getsockname()[1]}" for s in self._servers]
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> TcpFarm:
+        self._thread = threading.Thread(target=self._run, name="TcpFarm", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        for i in range(len(self.devices)):
+            self._drop(i)
+        for server in self._servers:
+            with contextlib.suppress(OSError):
+                server.close()
+
+    def _drop(self, i: int) -> None:
+        client, self._clients[i] = self._clients[i], None
+        if client is not None:
+            with contextlib.suppress(OSError):
+                client.close()
+
+    def _send(self, i: int, data: bytes) -> None:
+        client = self._clients[i]
+        if client is None:
+            return
+        try:
+            client.sendall(data)
+        except OSError:
+            self._drop(i)
+
+    def _run(self) -> None:
+        server_index = {s.fileno(): i for i, s in enumerate(self._servers)}
+        next_tick = time.monotonic()
+        while not self._stop.is_set():
+            client_index = {c.fileno(): i for i, c in enumerate(self._clients) if c is not None}
+            timeout = max(0.0, next_tick - time.monotonic())
+            try:
+                readable, _, _ = select.select([*server_index, *client_index], [], [], timeout)
+            except (OSError, ValueError):
+                continue  # a client closed under us: the next pass rebuilds the fd set
+            now = time.monotonic()
+            for fd in readable:
+                if fd in server_index:
+                    i = server_index[fd]
+                    with contextlib.suppress(BlockingIOError):
+                        client, _ = self._servers[i].accept()
+                        client.setblocking(True)
+                        client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                        self._drop(i)
+                        self._clients[i] = client
+                    continue
+                i = client_index[fd]
+                client = self._clients[i]
+                if client is None:
+                    continue
+                try:
+                    data = client.recv(4096)
+                except OSError:
+                    data = b""
+                if not data:
+                    self._drop(i)
+                    continue
+                out = self.devices[i].on_bytes(data, now)
+                if out:
+                    self._send(i, out)
+            if now >= next_tick:
+                next_tick += self.tick_interval
+                if next_tick < now:  # fell behind (a slow pass): skip, do not burst
+                    next_tick = now + self.tick_interval
+                for i, device in enumerate(self.devices):
+                    if self._clients[i] is not None:
+                        out = device.tick(now)
+                        if out:
+                            self._send(i, out)

@@ -204,7 +204,7 @@ class Northbound:
                         "domain": info.domain,
                         "type": info.type,
                         "sub_type": info.sub_type,
-                        "index": chr(ord("A") + i % 26),
+                        "index": channel_index(i),
                         "device_secret": _device_secret(self.settings, info.sn),
                         "nonce": secrets.token_hex(8),
                         "thing_version": info.thing_version,
@@ -225,7 +225,14 @@ class Northbound:
         return msg.model_dump_json(context={"reveal_secrets": True}).encode()
 
     def publish_topology(self) -> None:
-        self.outbox.publish(topic(TopicKind.STATUS, self.gateway_sn), self.topology(), qos=1)
+        """Called from device callbacks: a topology that cannot be built is logged, never raised into them."""
+        try:
+            raw = self.topology()
+        except ValidationError as exc:
+            self.metrics.inc("outbound_invalid_total", kind="status")
+            log.error("dropped an invalid update_topo: %s", exc.errors()[:2])
+            return
+        self.outbox.publish(topic(TopicKind.STATUS, self.gateway_sn), raw, qos=1)
         self.metrics.inc("topology_published_total")
 
     def publish_state(self, adapter: Adapter) -> None:
@@ -256,21 +263,35 @@ class Northbound:
         self._next_osd.clear()
 
     def publish_due_osd(self) -> None:
+        """Fixed-rate osd per device; devices are spread over their period (not all at one instant), so
+        hundreds of devices make a steady trickle of small bursts rather than one big one per period."""
         now = self.clock.monotonic()
         if now >= self._next_gateway_osd:
             self._next_gateway_osd = now + self.settings.osd_period
             self.gateway_osd({"drc_state": self.drc_state()})
-        for adapter in self.devices:
+        count = len(self.devices)
+        for i, adapter in enumerate(self.devices):
             sn = adapter.info.sn
-            if not adapter.online or now < self._next_osd.get(sn, 0.0):
+            period = self._osd_period.get(sn, self.settings.osd_period)
+            due = self._next_osd.get(sn)
+            if due is None:  # first time, or after a reconnect: the device's phase in the period
+                due = self._next_osd[sn] = now + period * i / count
+            if not adapter.online or now < due:
                 continue
-            self._next_osd[sn] = now + self._osd_period.get(sn, self.settings.osd_period)
+            due += period
+            self._next_osd[sn] = due if due > now else now + period  # fell behind: skip, never burst
             body = adapter.osd_snapshot()
             if body:
                 self.osd(sn, body)
 
+    def tick_interval(self) -> float:
+        """How often :meth:`run` looks at the schedule: 50 ms, finer when an osd period is short."""
+        periods = [*self._osd_period.values(), self.settings.osd_period]
+        return max(0.01, min(0.05, min(periods) / 5))
+
     async def run(self, stop: asyncio.Event) -> None:
-        """The periodic part: osd schedule and event re-sends, every 50 ms."""
+        """The periodic part: the osd schedule and event re-sends."""
+        tick = self.tick_interval()
         while not stop.is_set():
             try:
                 self.publish_due_osd()
@@ -279,7 +300,17 @@ class Northbound:
                 self.metrics.inc("handler_exceptions_total", where="northbound")
                 log.exception("periodic publishing failed")
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(stop.wait(), 0.05)
+                await asyncio.wait_for(stop.wait(), tick)
+
+
+def channel_index(i: int) -> str:
+    """The sub-device's channel letter: A … Z, then AA, AB … (spreadsheet columns), unique per device."""
+    out = ""
+    i += 1
+    while i:
+        i, r = divmod(i - 1, 26)
+        out = chr(ord("A") + r) + out
+    return out
 
 
 def _device_secret(settings: GatewaySettings, sn: str) -> str:

@@ -27,6 +27,7 @@ from adapters.config import ProductSettings
 from adapters.osdk.config import OsdkDeviceSettings
 from adapters.robomaster.config import RobomasterDeviceSettings
 from adapters.rsdk.config import RsdkDeviceSettings
+from schemas.status import MAX_SUB_DEVICES
 
 __all__ = [
     "BrokerSettings",
@@ -161,7 +162,7 @@ class GatewaySettings(BaseSettings):
     dispatcher: DispatcherSettings = DispatcherSettings()
     drc: DrcSettings = DrcSettings()
     metrics: MetricsSettings = MetricsSettings()
-    devices: list[DeviceSettings] = Field(default_factory=list)
+    devices: list[DeviceSettings] = Field(default_factory=list, max_length=MAX_SUB_DEVICES)
     osd_period: float = Field(2.0, gt=0, description="periodic osd (0.5 Hz by default, per device override)")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     log_json: bool = False

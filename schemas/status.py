@@ -20,6 +20,10 @@ from .base import Int, OutboundModel, SerialNumber, Text
 Domain = Annotated[str, StringConstraints(strict=True, pattern=r"^[0-9]{1,3}$")]
 
 
+#: Sub-devices one gateway may announce: the gateway's settings refuse more devices than this.
+MAX_SUB_DEVICES = 1024
+
+
 class SubDevice(OutboundModel):
     """One device behind the gateway."""
 
@@ -44,4 +48,6 @@ class UpdateTopo(OutboundModel):
     device_secret: Text
     nonce: Text
     thing_version: Text = Field(description="Thing model version, e.g. 1.1.2.")
-    sub_devices: list[SubDevice] = Field(max_length=64, description="Empty: every sub-device is offline.")
+    sub_devices: list[SubDevice] = Field(
+        max_length=MAX_SUB_DEVICES, description="Empty: every sub-device is offline."
+    )

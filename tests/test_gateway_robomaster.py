@@ -167,6 +167,8 @@ def test_a_velocity_command_moves_the_robot_and_its_hold_ends(rig: Rig) -> None:
     # a turn shows in attitude_head (compass: a left turn from east heads north, 90° → 0°)
     _ok(rig.cloud.service("x_robomaster_chassis_velocity", {"vx": 0.0, "wz": math.pi / 2, "duration": 0.5}))
     rig.osd(lambda d: d.get("attitude_head", 90) < 80)
+    # the turn's hold ends (its last, zero frame reached the board) before counting what arrives
+    wait_until(lambda: rig.adapter.velocity == (0.0, 0.0, 0.0) and rig.board("wz") == 0.0, 3, what="turned")
     # over the device's limits: refused before anything moves
     before = rig.board("received")["chassis_velocity"]
     bad = rig.cloud.service("x_robomaster_chassis_velocity", {"vx": 5.0})

@@ -9,45 +9,28 @@ import re
 import signal
 import subprocess
 import sys
-from collections.abc import Mapping
 from typing import Any
 
 import pytest
 
-from adapters.base import Adapter, CallResult, DeviceInfo, TelemetrySink
+from adapters.base import CallResult
 from adapters.rsdk.sim import GimbalCanSim, SlcanGimbal
 from adapters.simio import TcpEndpoint
 from gateway.local_broker import LocalBroker
-from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
+from tests.support import CloudClient, FakeAdapter, GatewayThread, gateway_settings, wait_until
 
 pytestmark = pytest.mark.broker
 
 GW = "GW-TEST-1"
 
 
-class FlakyAdapter(Adapter):
+class FlakyAdapter(FakeAdapter):
     """A device whose adapter has a bug: the first photo raises, later ones work."""
 
     def __init__(self) -> None:
-        self.info = DeviceInfo(sn="FLAKY-1", domain="1", type=1001, sub_type=0, payload_index="2001-0-0")
+        osd = {"payload_index": "2001-0-0", "gimbal_pitch": 0.0}
+        super().__init__("FLAKY-1", "2001-0-0", {"camera_photo_take": self._photo}, osd=osd)
         self.calls = 0
-        self.handlers = {"camera_photo_take": self._photo}
-
-    @property
-    def online(self) -> bool:
-        return True
-
-    async def start(self, sink: TelemetrySink) -> None:
-        sink.online_changed(self.info.sn, True)
-
-    async def stop(self) -> None:
-        return None
-
-    async def stop_motion(self) -> None:
-        return None
-
-    def osd_snapshot(self) -> Mapping[str, Any] | None:
-        return {"payload_index": self.info.payload_index, "gimbal_pitch": 0.0}
 
     async def _photo(self, data: Any) -> CallResult:
         self.calls += 1
@@ -265,3 +248,31 @@ def test_a_can_adapter_that_disappears_and_comes_back(broker: LocalBroker) -> No
         if sim.stdout:
             sim.stdout.close()
         gc.collect()
+
+
+def test_many_devices_one_topology_unique_channels_and_a_prompt_stop(broker: LocalBroker) -> None:
+    """70 robots on real loopback serial ports (more than the 26 letters and the old 64-entry cap): all come
+    online in one topology with a distinct channel index each, and the gateway stops within its 10 s bound
+    (each pyserial socket:// close sleeps 0.3 s: 21 s if the links were closed one after another)."""
+    from adapters.robomaster.sim import RefereeMatch, RobomasterSim
+    from adapters.simio import TcpFarm
+    from gateway.northbound import channel_index
+
+    assert [channel_index(i) for i in (0, 25, 26, 27, 51, 52, 701, 702)] == [
+        "A", "Z", "AA", "AB", "AZ", "BA", "ZZ", "AAA"
+    ]  # fmt: skip
+    n = 70
+    farm = TcpFarm([RobomasterSim(RefereeMatch(hit_period=0.0)) for _ in range(n)], tick_interval=0.2).start()
+    devices = [{"type": "robomaster", "sn": f"RM-{i:03d}", "url": url} for i, url in enumerate(farm.urls)]
+    cloud = CloudClient(broker.host, broker.port, "GW-MANY-1")
+    gw = GatewayThread(gateway_settings(broker.port, devices, gateway_sn="GW-MANY-1")).start()
+    try:
+        topo = cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == n, timeout=30)[-1]
+        subs = topo["data"]["sub_devices"]
+        assert sorted(s["sn"] for s in subs) == sorted(d["sn"] for d in devices)
+        assert len({s["index"] for s in subs}) == n
+        assert gw.app.metrics.count("outbound_invalid_total") == 0
+    finally:
+        gw.stop()  # raises when the gateway has not stopped within 10 s
+        cloud.close()
+        farm.stop()
