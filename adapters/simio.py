@@ -210,6 +210,8 @@ class TcpFarm:
     one client at a time, a reconnecting client replaces the previous one, ticks every ``tick_interval``.
     """
 
+    _SLOTS = 10  # devices tick in this many phases spread over ``tick_interval``
+
     def __init__(
         self, devices: list[StreamDevice], tick_interval: float = 0.05, host: str = "127.0.0.1"
     ) -> None:
@@ -261,6 +263,7 @@ class TcpFarm:
     def _run(self) -> None:
         server_index = {s.fileno(): i for i, s in enumerate(self._servers)}
         next_tick = time.monotonic()
+        slot = 0
         while not self._stop.is_set():
             client_index = {c.fileno(): i for i, c in enumerate(self._clients) if c is not None}
             timeout = max(0.0, next_tick - time.monotonic())
@@ -294,11 +297,15 @@ class TcpFarm:
                 if out:
                     self._send(i, out)
             if now >= next_tick:
-                next_tick += self.tick_interval
+                # one slot of devices per pass: real devices are not synchronised, and a farm that ticked
+                # them all at one instant would hand the host one big burst per period
+                slot_interval = self.tick_interval / self._SLOTS
+                next_tick += slot_interval
                 if next_tick < now:  # fell behind (a slow pass): skip, do not burst
-                    next_tick = now + self.tick_interval
-                for i, device in enumerate(self.devices):
+                    next_tick = now + slot_interval
+                for i in range(slot, len(self.devices), self._SLOTS):
                     if self._clients[i] is not None:
-                        out = device.tick(now)
+                        out = self.devices[i].tick(now)
                         if out:
                             self._send(i, out)
+                slot = (slot + 1) % self._SLOTS
