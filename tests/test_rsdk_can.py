@@ -6,14 +6,16 @@ from __future__ import annotations
 import json
 
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from adapters.rsdk import describe
 from adapters.rsdk.can import GIMBAL_TX_ID, HOST_TX_ID, Reassembler, segment
 from adapters.rsdk.candump import parse_line, parse_lines
-from adapters.rsdk.protocol import BadFrame, Frame, encode
+from adapters.rsdk.protocol import BadFrame, Frame, FrameRules, encode
+from tests.rsdk_can_reference import ReferenceReassembler
 
+RULES = FrameRules()
 SAMPLE = bytes.fromhex("AA1A0003000000002211A2420E0020003000400001147B4097BE")
 
 
@@ -181,6 +183,17 @@ def test_aa_at_a_can_boundary_inside_a_frame_is_data(where: int) -> None:
     assert feed_all(Reassembler(), segment(raw, GIMBAL_TX_ID)) == [f]
 
 
+def test_over_long_can_frame_is_rejected_even_if_it_would_finish_the_frame() -> None:
+    """9 bytes are never a CAN payload: the frame they would complete stays incomplete."""
+    raw = encode(mk(7, 1))
+    assert len(raw) == 25
+    r = Reassembler()
+    assert feed_all(r, [(GIMBAL_TX_ID, raw[:8]), (GIMBAL_TX_ID, raw[8:16])], flush=False) == []
+    (bad,) = r.feed(GIMBAL_TX_ID, raw[16:])
+    assert isinstance(bad, BadFrame) and "8 bytes" in bad.reason
+    assert r.decoder.pending == 16 and r.decoder.stats.frames == 0
+
+
 # 0xAA is frequent on purpose: it puts false SOFs at CAN frame starts, where the restart rule acts
 _byte = st.sampled_from([0x00, 0xAA, 0x55, 0x0E])
 frame_st = st.builds(
@@ -222,6 +235,108 @@ def test_random_can_frames_never_raise_nor_stall(payloads: list[bytes]) -> None:
         len(encode(f)) for f in frames_of(out)
     )
     assert accounted == sum(len(p) for p in payloads)
+
+
+# --- the fast path changes nothing: equivalence with the reassembler before it -------------------
+
+
+@st.composite
+def _can_frames_of_one_frame(draw: st.DrawFn) -> list[tuple[int, bytes | bytearray]]:
+    """One R SDK frame on the bus, mostly as sent, often damaged the ways a bus and a host damage it."""
+    kind = draw(st.sampled_from(["frame", "frame", "frame", "legacy", "encrypted"]))
+    if kind == "legacy":
+        frame = Frame(
+            None, None, bytes([draw(_byte)]), seq=draw(st.integers(0, 0xFFFF)), cmd_type=0, is_reply=True
+        )
+    else:
+        frame = draw(frame_st)
+        if kind == "encrypted":
+            frame = Frame(
+                frame.cmd_set, frame.cmd_id, frame.payload, frame.seq, frame.cmd_type, frame.is_reply, 0x20
+            )
+    raw = bytearray(encode(frame))
+    if draw(st.integers(0, 3)) == 0:  # a flipped bit: bad version/length/header CRC/frame CRC
+        raw[draw(st.integers(0, len(raw) - 1))] ^= 1 << draw(st.integers(0, 7))
+    if draw(st.integers(0, 4)) == 0:  # the frame does not start at byte 0 of a CAN frame
+        raw[:0] = bytes(draw(st.lists(_byte, min_size=1, max_size=7)))
+    if draw(st.integers(0, 5)) == 0:  # the sender stopped early
+        del raw[draw(st.integers(1, len(raw) - 1)) :]
+    if draw(st.integers(0, 3)) == 0:  # irregular cuts (a host that does not follow the rule, or > 8 bytes)
+        sizes = draw(st.lists(st.sampled_from([8, 8, 8, 1, 3, 7, 9]), min_size=1, max_size=12))
+        parts, i, k = [], 0, 0
+        while i < len(raw):
+            parts.append(bytes(raw[i : i + sizes[k % len(sizes)]]))
+            i, k = i + sizes[k % len(sizes)], k + 1
+    else:
+        parts = [d for _, d in segment(bytes(raw), GIMBAL_TX_ID)]
+    if len(parts) > 1 and draw(st.integers(0, 3)) == 0:  # a CAN frame takes bytes of the next (> 8 bytes)
+        k = draw(st.sampled_from([len(parts) - 2, draw(st.integers(0, len(parts) - 2))]))
+        take = draw(st.sampled_from([1, len(parts[k + 1])]))
+        parts[k : k + 2] = [p for p in (parts[k] + parts[k + 1][:take], parts[k + 1][take:]) if p]
+    if draw(st.integers(0, 4)) == 0:  # the rest comes later, if at all (a flush or a reset may come first)
+        parts = parts[: draw(st.integers(1, len(parts)))]
+    out: list[tuple[int, bytes | bytearray]] = []
+    n_parts = len(parts)
+    lost = draw(st.sets(st.integers(0, n_parts - 1), max_size=2)) if draw(st.booleans()) else set()
+    dup = draw(st.sets(st.integers(0, n_parts - 1), max_size=2)) if draw(st.integers(0, 3)) == 0 else set()
+    short = draw(st.sets(st.integers(0, n_parts - 1), max_size=1)) if draw(st.integers(0, 5)) == 0 else set()
+    arb = GIMBAL_TX_ID if draw(st.integers(0, 9)) else HOST_TX_ID
+    for k, part in enumerate(parts):
+        if k in lost:
+            continue
+        if k in short:
+            part = part[: draw(st.integers(0, max(0, len(part) - 1)))]
+        if draw(st.integers(0, 9)) == 0:  # another id in between
+            out.append((draw(st.sampled_from([HOST_TX_ID, 0x100])), bytes(draw(st.lists(_byte, max_size=8)))))
+        data: bytes | bytearray = bytearray(part) if draw(st.integers(0, 7)) == 0 else part
+        out.extend([(arb, data)] * (2 if k in dup else 1))
+    return out
+
+
+_bus_op = st.one_of(
+    _can_frames_of_one_frame(),
+    _can_frames_of_one_frame(),
+    _can_frames_of_one_frame(),
+    st.tuples(  # one stray CAN frame (0xAA-heavy), possibly over-long or on another id
+        st.sampled_from([GIMBAL_TX_ID, GIMBAL_TX_ID, GIMBAL_TX_ID, HOST_TX_ID]),
+        st.one_of(st.lists(_byte, max_size=9).map(bytes), st.binary(max_size=9)),
+    ).map(lambda p: [p]),
+    st.just("flush"),
+    st.just("reset"),
+)
+
+
+@settings(max_examples=500)
+@given(st.lists(_bus_op, max_size=12))
+def test_same_results_as_the_reference_reassembler(ops: list) -> None:
+    """Every item, in order, and every counter and held byte count after every call, are those of the
+    verbatim pre-fast-path class (tests/rsdk_can_reference.py), whatever the bus does."""
+    new, ref = Reassembler(), ReferenceReassembler()
+
+    def same(got: list, want: list) -> None:
+        assert got == want  # Frame and BadFrame compare by class and value
+        assert new.decoder.stats == ref.decoder.stats
+        assert new.decoder.pending == ref.decoder.pending
+        # white-box, so a divergence shows when it happens, not only once a later CAN frame exposes it
+        if new._want:  # fast path: the reference holds the same regular candidate, as announced
+            assert new._buf and ref._held == new._buf
+            assert ref._starts == list(range(0, len(ref._held), 8))
+            header = bytes(ref._held[:12])
+            assert new._want == (RULES.frame_length(header) if len(header) == 12 else -1)
+        else:  # general path: the same held bytes and CAN frame starts
+            assert (new._held, new._starts) == (ref._held, ref._starts)
+
+    for op in [*ops, "flush"]:
+        if op == "reset":
+            new.reset()
+            ref.reset()
+            same([], [])
+        elif op == "flush":
+            same(new.flush(), ref.flush())
+        else:
+            for arb_id, data in op:
+                same(new.feed(arb_id, data), ref.feed(arb_id, data))
+    assert new.decoder.pending == 0
 
 
 # --- candump -------------------------------------------------------------------------------------

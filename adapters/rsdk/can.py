@@ -16,6 +16,8 @@ __all__ = ["CAN_MTU", "GIMBAL_TX_ID", "HOST_TX_ID", "Reassembler", "segment"]
 HOST_TX_ID = 0x223  # host -> gimbal
 GIMBAL_TX_ID = 0x222  # gimbal -> host
 CAN_MTU = 8  # classic CAN payload
+_HEADER_LEN = FrameRules.header_len
+_NO_HEADER = -1  # Reassembler._want: a regular candidate whose header is not complete yet
 
 
 def segment(frame: bytes, arb_id: int = HOST_TX_ID) -> list[tuple[int, bytes]]:
@@ -54,7 +56,7 @@ class Reassembler:
     Every frame whose CAN frames all arrived is reported, in order.
     """
 
-    __slots__ = ("_decoder", "_held", "_rules", "_starts", "rx_id")
+    __slots__ = ("_buf", "_decoder", "_held", "_rules", "_starts", "_want", "rx_id")
 
     def __init__(self, rx_id: int = GIMBAL_TX_ID) -> None:
         self.rx_id = rx_id
@@ -62,6 +64,14 @@ class Reassembler:
         self._rules = FrameRules()
         self._held = bytearray()  # copy of the decoder's pending bytes (the candidate frame)
         self._starts: list[int] = []  # offsets in _held where a CAN frame began
+        # The fast path (see feed). _want != 0 while the candidate is regular so far: it began with 0xAA
+        # at byte 0 of a CAN frame and came in full CAN frames; _want is its announced length once its
+        # header is held and valid (_NO_HEADER before). It is all the decoder holds, and _held/_starts
+        # are empty. Its bytes go straight into the decoder's buffer, unscanned (a scan would only
+        # have returned []), so the decoder's ``pending`` stays exact. _buf is that buffer: the same
+        # bytearray for the decoder's life (StreamDecoder only extends, deletes from or clears it).
+        self._buf = self._decoder._buf
+        self._want = 0
 
     @property
     def decoder(self) -> Decoder:
@@ -70,6 +80,34 @@ class Reassembler:
 
     def feed(self, arb_id: int, data: bytes | bytearray) -> list[Frame | BadFrame]:
         if arb_id != self.rx_id:
+            return []
+        # Fast path: a regular frame costs an append per CAN frame, a header check at its second and a
+        # parse at its last. Each branch returns what the general path below would return (in the
+        # comments: why); anything else hands the candidate over to it (_leave_fast).
+        n = len(data)
+        want = self._want
+        if want > 0:
+            buf = self._buf
+            missing = want - len(buf)
+            if n == CAN_MTU and missing > CAN_MTU:
+                # rule 3 lets even an 0xAA CAN frame continue; the decoder would wait for the length
+                buf += data
+                return []
+            if n == missing and n <= CAN_MTU:  # the last CAN frame (rule 3 lets an 0xAA one finish it)
+                return self._complete(data)
+            self._leave_fast()
+        elif want:  # the second CAN frame completes the header (rule 4 lets an 0xAA one continue)
+            if n == CAN_MTU:
+                length = self._rules.frame_length(bytes(self._buf) + bytes(data[: _HEADER_LEN - CAN_MTU]))
+                if not isinstance(length, str) and length > 2 * CAN_MTU:  # always: a frame is >= 17
+                    self._want = length  # the decoder would check the header and wait for the length
+                    self._buf += data
+                    return []
+            self._leave_fast()
+        elif n == CAN_MTU and data[0] == SOF and not self._held:
+            # nothing held, so the decoder holds nothing either; it would keep this SOF and wait
+            self._buf += data
+            self._want = _NO_HEADER
             return []
         data = bytes(data)
         if len(data) > CAN_MTU:
@@ -96,15 +134,45 @@ class Reassembler:
 
     def flush(self) -> list[Frame | BadFrame]:
         """End of input or idle bus: report held bytes, finding any complete frame among them."""
+        self._want = 0
         self._held.clear()
         self._starts.clear()
         return self._decoder.flush()
 
     def reset(self) -> None:
         """Forget held bytes (bus reopened); counters are kept."""
+        self._want = 0
         self._decoder.reset()
         self._held.clear()
         self._starts.clear()
+
+    def _complete(self, data: bytes | bytearray) -> list[Frame | BadFrame]:
+        """The fast path's candidate has its announced length. The decoder would scan it from its SOF,
+        check the same header and parse the whole; parse here, and only if that fails let the decoder
+        scan (so the failure and any frame behind the SOF come out exactly as on the general path),
+        then leave held bytes and CAN frame starts as the general path's ``_trim`` would."""
+        self._want = 0
+        buf = self._buf
+        frame = self._rules.parse(bytes(buf) + data)
+        if not isinstance(frame, str):
+            buf.clear()
+            self._decoder.stats.frames += 1
+            return [frame]
+        total = len(buf) + len(data)
+        out = self._decoder.feed(data)
+        pending = self._decoder.pending
+        if pending:
+            drop = total - pending
+            self._held += buf
+            self._starts = [s - drop for s in range(0, total, CAN_MTU) if s >= drop]
+        return out
+
+    def _leave_fast(self) -> None:
+        """Hand the fast path's candidate to the general path, with held bytes and CAN frame starts
+        as the general path would have them (the decoder holds the same bytes either way)."""
+        self._want = 0
+        self._held += self._buf
+        self._starts = list(range(0, len(self._buf), CAN_MTU))
 
     def _trim(self) -> None:
         """Keep ``_held`` equal to the decoder's pending bytes, ``_starts`` to CAN frame starts in it."""
