@@ -184,7 +184,8 @@ def run(cfg: Config) -> list[Row]:
                 rows.append(Row(group="scale", case=f"N={n}: not measured", count=n, rate=float("nan"),
                                 unit="", note=why))  # fmt: skip
                 continue
-            note = (f"osd {r['osd_per_s']:.0f}/s (target {10 * n}/s), RSS {r['rss_mb']:.0f} MB, "
+            note = (f"osd {r['osd_per_s']:.0f}/s (10 Hz: {10 * n}/s robots + 10/s gateway), "
+                    f"RSS {r['rss_mb']:.0f} MB, "
                     f"{r['missed']:.0f} services unanswered within 5 s, "
                     f"{r['online']:.0f} of {n} online at the end")  # fmt: skip
             print(f"  .. scale N={n}: {r}", flush=True)
