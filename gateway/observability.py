@@ -88,6 +88,7 @@ _LINK_COUNTERS = {
     "crc_errors": "Frames dropped for a bad CRC",
     "framing_errors": "Drops that are not CRC failures: garbage, bad headers, truncated frames",
     "send_errors": "Sends that failed and closed the link",
+    "unmatched_replies": "Replies or ACKs that matched no request in flight: late, duplicated, wrong seq",
 }
 #: Unlabelled counters exported at 0 before they first count (dashboards and alerts need the series).
 _ZERO_COUNTERS = (
@@ -124,6 +125,7 @@ class LinkStats:
     crc_errors: int
     framing_errors: int  # bad frames that are not CRC failures: garbage, bad headers, truncation
     send_errors: int
+    unmatched_replies: int  # late, duplicated or wrong-seq replies/ACKs: dropped, never misapplied
 
 
 def link_stats(adapter: Any) -> LinkStats | None:
@@ -153,6 +155,7 @@ def link_stats(adapter: Any) -> LinkStats | None:
         crc_errors=crc,
         framing_errors=max(0, bad - crc),
         send_errors=int(getattr(link, "send_errors", 0)),
+        unmatched_replies=int(getattr(adapter, "unmatched_replies", 0)),
     )
 
 

@@ -181,5 +181,5 @@ def test_a_late_ack_is_an_error_and_matches_nothing_later(rig: dict[str, Any]) -
     r = cloud.service("flight_authority_grab", {})
     assert r["data"]["result"] == 325004 and time.monotonic() - t0 < 3.0
     fc.inspect(lambda m: setattr(m, "ack_delay", 0.0))
-    wait_until(lambda: adapter.late_acks >= 1, 6, what="the late ACK arrived and was dropped")
+    wait_until(lambda: adapter.unmatched_replies >= 1, 6, what="the late ACK arrived and was dropped")
     assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0

@@ -150,7 +150,7 @@ class AircraftAdapter(SupervisedAdapter):
         self.has_control = False
         self.mission: Task | None = None
         self._mission_task: asyncio.Task[None] | None = None
-        self.late_acks = 0
+        self.unmatched_replies = 0  # ACKs after their deadline or for no request (metrics)
         self.handlers = {
             "flight_authority_grab": self._grab,
             "fly_to_point": self._fly_to_point,
@@ -363,7 +363,7 @@ class AircraftAdapter(SupervisedAdapter):
         if frame.is_ack:
             p = self._sessions.on_ack(frame)
             if p is None:
-                self.late_acks += 1  # late (after its deadline) or unknown: never matched to anything
+                self.unmatched_replies += 1  # late (after its deadline) or unknown: never matched to anything
                 return
             fut, name = p.tag  # type: ignore[misc]
             if fut.done():

@@ -91,6 +91,7 @@ class GimbalAdapter(SupervisedAdapter):
         self._rx = Reassembler(rx_id=settings.rx_id)
         self._seq = 0
         self._pending: dict[int, _Pending] = {}
+        self.unmatched_replies = 0  # replies matching no request in flight (metrics)
         self._next_poll = 0.0  # when an offline gimbal is next asked to (re-)enable its push
         # what the gimbal told us (wire units converted to degrees)
         self.attitude: tuple[float, float, float] | None = None  # yaw, roll, pitch
@@ -226,10 +227,12 @@ class GimbalAdapter(SupervisedAdapter):
         self._last_heard = self._now()
         self._set_online(True)
         if frame.is_reply:
-            p = self._pending.pop(frame.seq, None)
-            if p is None:
+            p = self._pending.get(frame.seq)
+            if p is None or (frame.key is not None and frame.key != (p.cmd_set, p.cmd_id)):
+                # late, duplicated or carrying another request's seq: never misapplied to a request
                 self._on_unsolicited_reply(frame)
                 return
+            del self._pending[frame.seq]
             try:
                 msg = decode_reply(frame, p.cmd_set, p.cmd_id, p.name)
             except CommandError as exc:
@@ -247,11 +250,14 @@ class GimbalAdapter(SupervisedAdapter):
             self._on_push(msg.fields)
 
     def _on_unsolicited_reply(self, frame: Frame) -> None:
-        """Replies to fire-and-forget commands (the start-up version query) still carry news."""
+        """Replies to fire-and-forget commands (the start-up version query) still carry news; any
+        other reply without its request in flight is counted and dropped."""
         if frame.key == (0x0E, 0x09):
             with contextlib.suppress(CommandError):
                 msg = decode_reply(frame, 0x0E, 0x09, "get_version")
                 self._version_from(msg.fields)
+            return
+        self.unmatched_replies += 1
 
     def _version_from(self, f: Mapping[str, Any]) -> None:
         v = int(f.get("version", 0))

@@ -58,6 +58,55 @@ class Axis:
 
 
 @dataclass
+class ReplyFaults:
+    """How a misbehaving gimbal answers (tests, and ``simulate rsdk --fault``). Replies only: the
+    parameter push stays intact, so the gimbal stays online while its answers go wrong."""
+
+    corrupt_crc: bool = False  # the last CRC32 byte flipped
+    truncate: bool = False  # the CRC32 never sent (the frame ends short)
+    seq_offset: int = 0  # replies carry the command's seq plus this
+    duplicate: bool = False  # every reply sent twice
+    delay: float = 0.0  # replies sent this many seconds late
+
+    @classmethod
+    def parse(cls, specs: Sequence[str]) -> ReplyFaults:
+        """``crc``, ``truncate``, ``duplicate``, ``seq=N``, ``delay=SECONDS`` (the CLI's ``--fault``)."""
+        f = cls()
+        for spec in specs:
+            name, _, value = spec.partition("=")
+            if name == "crc" and not value:
+                f.corrupt_crc = True
+            elif name == "truncate" and not value:
+                f.truncate = True
+            elif name == "duplicate" and not value:
+                f.duplicate = True
+            elif name == "seq" and value.lstrip("-").isdigit():
+                f.seq_offset = int(value)
+            elif name == "delay" and _is_seconds(value):
+                f.delay = float(value)
+            else:
+                raise ValueError(f"unknown fault {spec!r} (crc, truncate, duplicate, seq=N, delay=SECONDS)")
+        return f
+
+    def apply(self, raws: list[bytes]) -> list[bytes]:
+        out: list[bytes] = []
+        for raw in raws:
+            if self.corrupt_crc:
+                raw = raw[:-1] + bytes([raw[-1] ^ 0xFF])
+            if self.truncate:
+                raw = raw[:-4]
+            out += [raw, raw] if self.duplicate else [raw]
+        return out
+
+
+def _is_seconds(text: str) -> bool:
+    try:
+        return 0 <= float(text) < 3600
+    except ValueError:
+        return False
+
+
+@dataclass
 class GimbalModel:
     """The gimbal's state and its answers. Time is passed in; nothing here sleeps or reads a clock."""
 
@@ -86,6 +135,8 @@ class GimbalModel:
     active_track: bool = False
     speed_until: float = 0.0
     received: Counter[str] = field(default_factory=Counter)
+    faults: ReplyFaults = field(default_factory=ReplyFaults)
+    _late: list[tuple[float, bytes]] = field(default_factory=list)  # delayed replies: (due, frame)
     _last: float | None = None
     _next_push: float = 0.0
     _push_seq: int = 0
@@ -126,7 +177,7 @@ class GimbalModel:
             msg = decode_message(frame)
         except CommandError:
             self.received["<undecodable>"] += 1
-            return self._reply_raw(frame, RC_PARSE_ERROR) if frame.needs_reply else []
+            return self._reply_raw(frame, RC_PARSE_ERROR, now) if frame.needs_reply else []
         self.received[msg.name] += 1
         handler = getattr(self, f"_on_{msg.name}", None)
         fields: dict[str, Any] = {"return_code": RC_OK}
@@ -134,13 +185,23 @@ class GimbalModel:
             fields = handler(msg.fields, now)
         if not frame.needs_reply:
             return []
-        return [self._reply(msg.name, frame.seq, fields)]
+        return self._answer([self._reply(msg.name, frame.seq, fields)], now)
+
+    def _answer(self, replies: list[bytes], now: float) -> list[bytes]:
+        replies = self.faults.apply(replies)
+        if self.faults.delay > 0:
+            self._late += [(now + self.faults.delay, r) for r in replies]
+            return []
+        return replies
 
     def tick(self, now: float) -> list[bytes]:
-        """Advance the axes; returns the 10 Hz push when it is due."""
+        """Advance the axes; returns delayed replies that are due and the 10 Hz push when it is due."""
         self.advance(now)
+        due = [r for t, r in self._late if t <= now]
+        if due:
+            self._late = [(t, r) for t, r in self._late if t > now]
         if not self.push_enabled or now < self._next_push:
-            return []
+            return due
         self._next_push = now + PUSH_PERIOD_S
         self._push_seq = (self._push_seq + 1) & 0xFFFF
         y, r, p = (round(a * 10) for a in self.attitude())
@@ -155,18 +216,20 @@ class GimbalModel:
             **self.limits,
             **self.stiffness,
         }
-        return [encode(build_frame("param_push", self._push_seq, fields))]
+        return [*due, encode(build_frame("param_push", self._push_seq, fields))]
 
     def _reply(self, name: str, seq: int, fields: dict[str, Any]) -> bytes:
+        seq = (seq + self.faults.seq_offset) & 0xFFFF
         return encode(build_frame(name, seq, fields, reply=True, legacy=self.legacy_replies))
 
-    def _reply_raw(self, frame: Frame, code: int) -> list[bytes]:
+    def _reply_raw(self, frame: Frame, code: int, now: float) -> list[bytes]:
         if frame.key is None:
             return []
         cmd_set, cmd_id = frame.key
+        seq = (frame.seq + self.faults.seq_offset) & 0xFFFF
         if self.legacy_replies:
-            return [encode(Frame(None, None, bytes([code]), frame.seq, 0, True))]
-        return [encode(Frame(cmd_set, cmd_id, bytes([code]), frame.seq, 0, True))]
+            return self._answer([encode(Frame(None, None, bytes([code]), seq, 0, True))], now)
+        return self._answer([encode(Frame(cmd_set, cmd_id, bytes([code]), seq, 0, True))], now)
 
     # -- command handlers: fields in wire units, reply fields out --------------------------------------
     def _on_position_control(self, f: dict[str, Any], now: float) -> dict[str, Any]:
@@ -322,6 +385,7 @@ class GimbalCanSim:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="gimbal-sim", daemon=True)
         self.paused = False
+        self.error_frames = False  # put a CAN error frame on the bus before every reply
 
     @property
     def model(self) -> GimbalModel:
@@ -353,7 +417,11 @@ class GimbalCanSim:
             if self.paused:
                 continue
             if msg is not None and not msg.is_extended_id and not msg.is_error_frame:
-                self._send(self.node.on_can(msg.arbitration_id, bytes(msg.data), now))
+                replies = self.node.on_can(msg.arbitration_id, bytes(msg.data), now)
+                if replies and self.error_frames:  # a bit error / stuff error flagged by a controller
+                    self._bus.send(self._can.Message(arbitration_id=0x088, is_error_frame=True, dlc=8,
+                                                     data=bytes(8)))  # fmt: skip
+                self._send(replies)
             self._send(self.node.tick(now))
 
 
@@ -392,8 +460,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--can", metavar="INTERFACE:CHANNEL", help="sit on a python-can bus, e.g. socketcan:vcan0"
     )
     p.add_argument("--legacy-replies", action="store_true", help="answer in the pre-2.2.0.5 reply format")
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="FAULT",
+        help="answer badly, to see what the gateway does (repeatable): crc, truncate, duplicate, "
+        "seq=N (replies carry seq+N), delay=SECONDS",
+    )
     ns = p.parse_args(argv)
-    model = GimbalModel(legacy_replies=ns.legacy_replies)
+    try:
+        faults = ReplyFaults.parse(ns.fault)
+    except ValueError as exc:
+        p.error(str(exc))
+    model = GimbalModel(legacy_replies=ns.legacy_replies, faults=faults)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
