@@ -20,6 +20,7 @@ import sys
 import threading
 import time
 import uuid
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +43,11 @@ def _proc_status(pid: int) -> dict[str, float]:
         elif line.startswith("Threads:"):
             out["threads"] = float(line.split()[1])
     return out
+
+
+def _by_code(codes: Counter[int]) -> str:
+    """``: 3×327006, 1×319031`` (empty when every request succeeded): what went wrong, not just how often."""
+    return (": " + ", ".join(f"{n}×{code}" for code, n in codes.most_common())) if codes else ""
 
 
 def _slope(ys: list[float]) -> float:
@@ -186,7 +192,8 @@ def run(cfg: Config) -> list[Row]:
             time.sleep(3.0)
         with cloud._lock:
             unanswered = sum(1 for tid in sent if tid not in cloud.replies)
-            failed = sum(1 for tid in sent if cloud.replies.get(tid, 0) != 0)
+            codes = Counter(cloud.replies[tid] for tid in sent if cloud.replies[tid] != 0)
+            failed = sum(codes.values())
     finally:
         stop_photos.set()
         cloud.close()
@@ -202,7 +209,8 @@ def run(cfg: Config) -> list[Row]:
     rss = [s["rss_kb"] / 1024 for s in samples]
     slope_kb = _slope([s["rss_kb"] for s in samples[len(samples) // 2 :]])
     first, last = samples[0], samples[-1]
-    note = (f"{kills} SIGKILLs, {len(sent)} services ({failed} non-zero results), DRC on the main broker; "
+    note = (f"{kills} SIGKILLs, {len(sent)} services  "
+            f"({failed} non-zero results{_by_code(codes)}), DRC on the main broker; "
             f"threads {first['threads']:.0f} → {last['threads']:.0f}, "
             f"fds {first['fds']:.0f} → {last['fds']:.0f}")  # fmt: skip
     return [

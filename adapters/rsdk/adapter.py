@@ -53,7 +53,15 @@ from adapters.base import (
     TelemetrySink,
 )
 from adapters.rsdk.can import Reassembler, segment
-from adapters.rsdk.commands import CommandError, Message, build_frame, decode_message, decode_reply, lookup
+from adapters.rsdk.commands import (
+    TABLE,
+    CommandError,
+    Message,
+    build_frame,
+    decode_message,
+    decode_reply,
+    lookup,
+)
 from adapters.rsdk.config import RsdkDeviceSettings
 from adapters.rsdk.link import CanLink, LinkError
 from adapters.rsdk.protocol import Frame, encode
@@ -77,6 +85,17 @@ class _Pending:
     cmd_set: int
     cmd_id: int
     name: str
+
+
+_CMD_SETS = frozenset(cmd_set for cmd_set, _ in TABLE)
+
+
+def _answers_another_command(frame: Frame, cmd_set: int, cmd_id: int) -> bool:
+    """A reply carrying another command's CmdSet/CmdID (a stale reply on a reused seq). A legacy reply
+    (firmware before 2.2.0.5) has no CmdSet/CmdID: its data starts with a return code, never with a
+    command set, so its first two bytes say nothing about which command it answers."""
+    key = frame.key
+    return key is not None and key[0] in _CMD_SETS and key != (cmd_set, cmd_id)
 
 
 class GimbalAdapter(SupervisedAdapter):
@@ -228,7 +247,7 @@ class GimbalAdapter(SupervisedAdapter):
         self._set_online(True)
         if frame.is_reply:
             p = self._pending.get(frame.seq)
-            if p is None or (frame.key is not None and frame.key != (p.cmd_set, p.cmd_id)):
+            if p is None or _answers_another_command(frame, p.cmd_set, p.cmd_id):
                 # late, duplicated or carrying another request's seq: never misapplied to a request
                 self._on_unsolicited_reply(frame)
                 return
