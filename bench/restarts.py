@@ -209,7 +209,7 @@ def run(cfg: Config) -> list[Row]:
     rss = [s["rss_kb"] / 1024 for s in samples]
     slope_kb = _slope([s["rss_kb"] for s in samples[len(samples) // 2 :]])
     first, last = samples[0], samples[-1]
-    note = (f"{kills} SIGKILLs, {len(sent)} services  "
+    note = (f"{kills} SIGKILLs, {len(sent)} services "
             f"({failed} non-zero results{_by_code(codes)}), DRC on the main broker; "
             f"threads {first['threads']:.0f} → {last['threads']:.0f}, "
             f"fds {first['fds']:.0f} → {last['fds']:.0f}")  # fmt: skip
