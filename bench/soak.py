@@ -11,6 +11,7 @@ import json
 import threading
 import time
 import uuid
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +51,7 @@ def run(cfg: Config) -> list[Row]:
         gw = GatewayThread(settings).start()
         echoes: set[int] = set()
         replies = threading.Event()
+        events: list[str] = []
         cloud = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"soak-{uuid.uuid4().hex[:6]}")
 
         def on_message(c: Any, u: Any, msg: paho.MQTTMessage) -> None:
@@ -58,11 +60,17 @@ def run(cfg: Config) -> list[Row]:
                 echoes.add(int(body["data"]["seq"]))
             elif msg.topic.endswith("/services_reply"):
                 replies.set()
+            elif msg.topic.endswith("/events") and body.get("need_reply") == 1:  # as a real cloud does
+                events.append(body["method"])
+                reply = {"tid": body["tid"], "bid": body["bid"], "timestamp": 0, "method": body["method"],
+                         "data": {"result": 0}}  # fmt: skip
+                c.publish(msg.topic + "_reply", json.dumps(reply), qos=1)
 
         cloud.on_message = on_message
         cloud.connect("127.0.0.1", broker.port)
         cloud.loop_start()
-        cloud.subscribe([(f"thing/product/{GW}/drc/up", 0), (f"thing/product/{GW}/services_reply", 1)])
+        cloud.subscribe([(f"thing/product/{GW}/drc/up", 0), (f"thing/product/{GW}/services_reply", 1),
+                         (f"thing/product/{GW}/events", 1)])  # fmt: skip
         time.sleep(0.5)
         deadline = time.monotonic() + 10
         while not gw.app.devices.by_sn("RSDK-SOAK").online and time.monotonic() < deadline:
@@ -108,7 +116,8 @@ def run(cfg: Config) -> list[Row]:
         sim.stop()
     if missed:
         raise AssertionError(f"{missed} of {beats} heartbeat echoes missing")
-    note = f"{seconds:.0f} s, {sticks} sticks at 20 Hz, {beats} heartbeats at 1 Hz"
+    kinds = ", ".join(f"{n}× {m}" for m, n in Counter(events).most_common()) or "none"
+    note = f"{seconds:.0f} s, {sticks} sticks at 20 Hz, {beats} heartbeats at 1 Hz; events answered: {kinds}"
     return [
         Row(group="soak", case="heartbeat echoes missed (must be 0)", count=beats, rate=float(missed),
             unit="missed", note=note),
