@@ -19,6 +19,13 @@ on a device reply. So:
   link's writer thread, so a stalled device cannot hold the thread either;
 * everything else (entering, leaving, events, the osd/hsi/delay pushes) runs in the loop.
 
+A flood of ``drone_control`` (a cloud bug, a stuck key repeat) must not starve heartbeats: every
+message costs the network thread a parse, a reply and a device frame, so past ``max_stick_rate``
+sticks are dropped *before* they are parsed (a byte match on the method, counted as
+``drc_rejected_total{reason="rate"}``), which keeps the thread reading far beyond any real stick
+rate; heartbeats and emergency stops never count against the budget. The devices see at most that
+rate plus the stream. (Past what paho itself can read, the backlog is the broker's: docs/drc.md.)
+
 Sticks are the seed's: ``x`` lateral (+ left), ``y`` longitudinal (+ forward), ``h`` vertical
 (+ up), ``w`` yaw rate (+ clockwise); ``x_sign``, ``y_sign`` and ``swap_xy`` adapt clouds that
 disagree. Devices receive body-frame forward / right / up velocities and a clockwise yaw rate.
@@ -29,6 +36,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import re
 import threading
 import time
 from collections.abc import Callable
@@ -40,6 +48,7 @@ from adapters.base import Adapter
 from gateway.devices import DeviceTable
 from gateway.metrics import Metrics
 from gateway.mqtt import MqttBridge
+from gateway.ratelimit import TokenBucket
 from gateway.settings import BrokerSettings, GatewaySettings
 from schemas import ResultCode, TopicKind, echo_heart_beat, error_reply_from_validation, reply_for, topic
 from schemas.registry import Registry
@@ -49,6 +58,8 @@ log = logging.getLogger(__name__)
 __all__ = ["DrcController"]
 
 ZERO = (0.0, 0.0, 0.0, 0.0)
+#: how a drone_control is recognised before it is parsed (whatever the spacing around the colon)
+_STICK = re.compile(rb'"method"\s*:\s*"drone_control"')
 
 
 class DrcController:
@@ -90,6 +101,8 @@ class DrcController:
         self.stopped_for_heartbeat = False
         self._stick_received: float | None = None
         self.cmd_delay_ms = 0.0
+        # -- network thread only --
+        self._stick_budget = self._new_stick_budget()
         # -- loop-owned --
         self._bridge: MqttBridge | None = None  # dedicated DRC connection, None when reusing main
         self._up: MqttBridge = main_bridge
@@ -131,6 +144,7 @@ class DrcController:
             self.last_heartbeat = now  # the session starts alive: the idle limit counts from here
             self.estop = False
             self.stopped_for_heartbeat = False
+            self._stick_budget = self._new_stick_budget()
         self._start_stream()
         self._push_task = self.loop.create_task(self._pushes(), name="drc-pushes")
         self._set_state(2, 0)
@@ -260,7 +274,14 @@ class DrcController:
     def _publish_up(self, message: Any) -> None:
         self._up.publish(self.up_topic, message.model_dump_json().encode(), qos=0)
 
+    def _new_stick_budget(self) -> TokenBucket:
+        rate = self.cfg.max_stick_rate
+        return TokenBucket(rate, burst=max(10.0, rate / 5), now=self.now())
+
     def handle_down(self, payload: bytes) -> None:
+        if _STICK.search(payload) is not None and not self._stick_budget.take(self.now()):
+            self.metrics.inc("drc_rejected_total", reason="rate")
+            return
         try:
             request = self.registry.validate(TopicKind.DRC_DOWN, payload)
         except ValidationError as exc:

@@ -128,6 +128,12 @@ class DrcSettings(BaseModel):
     heartbeat_timeout: float = Field(3.0, gt=0, le=30, description="no heart_beat this long → stop, 514301")
     idle_timeout: float = Field(60.0, gt=0, le=3600, description="no heart_beat this long → leave DRC")
     stream_hz: float = Field(25.0, ge=20, le=50, description="set-point stream to the devices")
+    max_stick_rate: float = Field(
+        100.0,
+        ge=20,
+        le=1000,
+        description="drone_control read per second at most (repeats count); more is dropped unread",
+    )
     enter_timeout: float = Field(2.0, gt=0, le=2.5, description="wait for the DRC broker (s)")
     x_sign: Literal[1, -1] = Field(1, description="seed: +x is left; -1 when your cloud sends +x right")
     y_sign: Literal[1, -1] = Field(1, description="seed: +y is forward; -1 when your cloud sends +y back")

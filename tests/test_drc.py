@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import logging
+import subprocess
+import sys
 import threading
 import time
 import uuid
@@ -296,6 +298,34 @@ def test_enter_refusals(rig: dict[str, Any]) -> None:
     assert rig["sim"].model.yaw.speed == 0.0
 
 
+def test_credentials_that_expire_during_a_session_do_not_drop_it(rig: dict[str, Any]) -> None:
+    """``expire_time`` bounds when ``drc_mode_enter`` may use the credentials, not how long an open link
+    lives: the operator flying when it passes keeps flying (heartbeats echoed, sticks obeyed)."""
+    cloud, model, gw = rig["cloud"], rig["sim"].model, rig["gw"]
+    expire = int(time.time()) + 2
+    assert _enter(cloud, rig["drc_broker"], expire_time=expire)["data"]["result"] == 0
+    drc = DrcClient(rig["drc_broker"].port, DRC_USER, DRC_PASSWORD)
+    try:
+        seq = 0
+        while time.time() < expire + 1.0:  # 20 Hz sticks, 5 Hz heartbeats, across the expiry
+            seq += 1
+            drc.send("drone_control", {"seq": seq, "w": 15.0})
+            if seq % 4 == 1:
+                drc.send("heart_beat", {"seq": seq, "timestamp": seq})
+            time.sleep(0.05)
+        drc.send("heart_beat", {"seq": 100_000, "timestamp": 1})
+        assert drc.wait("heart_beat", lambda d: d["seq"] == 100_000)["data"]["timestamp"] == 1
+        drc.send("drone_control", {"seq": seq + 1, "w": 16.0})
+        wait_until(lambda: model.yaw.speed == 16.0, 3, what="sticks obeyed after the expiry")
+    finally:
+        drc.close()
+    assert gw.app.drc.active and gw.app.drc.drc_state == 2
+    assert gw.app.metrics.count("drc_failsafe_stops_total") == 0
+    assert not cloud.find(
+        "events", lambda b: b["method"] == "drc_status_notify" and b["data"]["drc_state"] == 0
+    )
+
+
 def test_drc_on_the_main_broker_reuses_its_connection(broker: LocalBroker, can_channel: str) -> None:
     sim = GimbalCanSim(interface="virtual", channel=can_channel).start()
     device = {
@@ -327,3 +357,76 @@ def test_drc_on_the_main_broker_reuses_its_connection(broker: LocalBroker, can_c
         wait_until(lambda: sim.model.yaw.speed == 5.0, 3, what="driven over the main connection")
     cloud.close()
     sim.stop()
+
+
+#: a cloud gone wrong, in its own process (as it would be): drone_control at RATE a second, a
+#: hundred times the 20 Hz a cloud streams (past what paho can read, a flood on the same connection
+#: queues in the broker and the kernel, whatever the gateway does: see docs/drc.md)
+_FLOOD = """
+import signal, sys, time
+import paho.mqtt.client as paho
+from paho.mqtt.enums import CallbackAPIVersion
+port, user, password, topic, rate = sys.argv[1:6]
+signal.signal(signal.SIGTERM, lambda *a: sys.exit(0))
+client = paho.Client(CallbackAPIVersion.VERSION2, client_id="flooder")
+client.username_pw_set(user, password)
+client.connect("127.0.0.1", int(port))
+client.loop_start()
+seq, start, batch = 1, time.monotonic(), int(rate) // 20
+try:
+    while True:  # a batch every 50 ms, paced against the start so the rate holds on a busy machine
+        for _ in range(batch):
+            body = '{"method": "drone_control", "data": {"seq": %d, "w": %d}}' % (seq, 20 + seq % 2)
+            client.publish(topic, body, qos=0)
+            seq += 1
+        if seq <= batch + 1:
+            print("started", flush=True)
+        time.sleep(max(0.0, start + (seq - 1) / int(rate) - time.monotonic()))
+finally:
+    print(seq - 1, flush=True)
+"""
+
+
+def test_a_flood_of_sticks_starves_no_heartbeat_reply_or_device(rig: dict[str, Any]) -> None:
+    """drone_control at 2,000 a second from another process: heartbeats are still echoed, services
+    to the same gimbal still answered, no failsafe fires, and the gimbal's link carries at most
+    ``max_stick_rate`` plus the stream, not the flood: the excess is dropped unread and counted."""
+    cloud, model, sniffer, gw = rig["cloud"], rig["sim"].model, rig["sniffer"], rig["gw"]
+    drc_broker = rig["drc_broker"]
+    assert _enter(cloud, drc_broker)["data"]["result"] == 0
+    operator = DrcClient(drc_broker.port, DRC_USER, DRC_PASSWORD)
+    operator.send("heart_beat", {"seq": 1, "timestamp": 1})
+    flood = subprocess.Popen(
+        [sys.executable, "-c", _FLOOD, str(drc_broker.port), DRC_USER, DRC_PASSWORD,
+         f"thing/product/{GW}/drc/down", "2000"],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert flood.stdout is not None and flood.stdout.readline()  # the first batch is out
+        wait_until(lambda: model.yaw.speed in (20.0, 21.0), 3, what="moving under the flood")
+        started, frames_before = time.monotonic(), sniffer.names()["speed_control"]
+        for i in range(20):  # 2 s at 10 Hz: heartbeats and services through the flood
+            operator.send("heart_beat", {"seq": 100 + i, "timestamp": 1000 + i})
+            reply = cloud.service("x_rsdk_version_get", {"payload_index": PI}, timeout=3)
+            assert reply["data"]["result"] == 0, reply
+            time.sleep(0.1)
+        wait_until(lambda: operator.count("heart_beat", lambda d: d["seq"] >= 100) == 20, 3,
+                   what="20 heartbeats echoed in the flood")  # fmt: skip
+        elapsed = time.monotonic() - started
+        frames = sniffer.names()["speed_control"] - frames_before
+        assert flood.poll() is None, "the flood ran throughout"
+    finally:
+        flood.terminate()
+        out, _ = flood.communicate(timeout=10)
+        operator.close()
+    sent = int(out.split()[-1])
+    dropped = gw.app.metrics.count("drc_rejected_total", reason="rate")
+    applied = gw.app.metrics.count("drc_sticks_total")
+    print(f"flood: {sent} sticks sent, {applied:.0f} applied, {dropped:.0f} dropped unread, "
+          f"{frames} speed frames to the gimbal in {elapsed:.1f} s")  # fmt: skip
+    cfg = gw.app.settings.drc
+    assert dropped > 0 and applied <= cfg.max_stick_rate * (elapsed + 5) + 100
+    # stick frames + stream frames, with a stream tick's worth of slack per second
+    assert frames <= (cfg.max_stick_rate + cfg.stream_hz + 5) * elapsed + 20
+    assert gw.app.metrics.count("drc_failsafe_stops_total") == 0
+    assert model.yaw.speed in (20.0, 21.0)
