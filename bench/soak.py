@@ -22,7 +22,7 @@ from adapters.rsdk.sim import GimbalCanSim
 from bench.run import Config, Row
 from gateway.local_broker import LocalBroker
 from gateway.settings import load_settings
-from tests.support import GatewayThread
+from tests.support import GatewayThread, answer_event
 
 GW = "GW-SOAK-1"
 
@@ -60,11 +60,8 @@ def run(cfg: Config) -> list[Row]:
                 echoes.add(int(body["data"]["seq"]))
             elif msg.topic.endswith("/services_reply"):
                 replies.set()
-            elif msg.topic.endswith("/events") and body.get("need_reply") == 1:  # as a real cloud does
+            elif answer_event(c, msg.topic, body):  # as a real cloud does
                 events.append(body["method"])
-                reply = {"tid": body["tid"], "bid": body["bid"], "timestamp": 0, "method": body["method"],
-                         "data": {"result": 0}}  # fmt: skip
-                c.publish(msg.topic + "_reply", json.dumps(reply), qos=1)
 
         cloud.on_message = on_message
         cloud.connect("127.0.0.1", broker.port)

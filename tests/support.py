@@ -39,6 +39,21 @@ def wait_until(
         time.sleep(interval)
 
 
+def answer_event(client: paho.Client, topic_name: str, body: Any) -> bool:
+    """Answer an event that asks for it (``need_reply``) as a real cloud does; True if it did."""
+    if not (topic_name.endswith("/events") and isinstance(body, dict) and body.get("need_reply") == 1):
+        return False
+    reply = {
+        "tid": body.get("tid"),
+        "bid": body.get("bid"),
+        "timestamp": int(time.time() * 1000),
+        "method": body.get("method"),
+        "data": {"result": 0},
+    }
+    client.publish(topic_name + "_reply", json.dumps(reply), qos=1)
+    return True
+
+
 class CloudClient:
     """What a cloud platform does: publish services, read replies, osd, state, events and topology."""
 
@@ -85,17 +100,8 @@ class CloudClient:
         with self._new:
             self.messages.append((msg.topic, body, bytes(msg.payload)))
             self._new.notify_all()
-        wants_reply = isinstance(body, dict) and body.get("need_reply") == 1
-        if self.answer_events and wants_reply and msg.topic.endswith("/events"):
-            assert isinstance(body, dict)
-            reply = {
-                "tid": body.get("tid"),
-                "bid": body.get("bid"),
-                "timestamp": int(time.time() * 1000),
-                "method": body.get("method"),
-                "data": {"result": 0},
-            }
-            client.publish(msg.topic + "_reply", json.dumps(reply), qos=1)
+        if self.answer_events:
+            answer_event(client, msg.topic, body)
 
     def publish(self, topic: str, payload: bytes | str | dict[str, Any], qos: int = 1) -> None:
         if isinstance(payload, dict):
