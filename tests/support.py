@@ -198,10 +198,12 @@ class GatewayThread:
         if self._error:
             raise self._error
         if connected:
+            # subscribed, not just connected: a service published before the broker acknowledged the
+            # SUBSCRIBE would reach nobody (seen once in CI: a test's first request got no reply)
             wait_until(
-                lambda: self.app and self.app.bridge and self.app.bridge.connected,
+                lambda: self.app and self.app.bridge and self.app.bridge.subscribed,
                 10,
-                what="broker connection",
+                what="broker connection and subscriptions",
             )
         return self
 
