@@ -110,6 +110,7 @@ def _lazy(module: str, func: str = "run") -> Suite:
 SUITES: list[tuple[str, Suite]] = [
     ("codecs", _lazy("bench.codecs")),
     ("e2e", _lazy("bench.e2e")),
+    ("drc_session", _lazy("bench.drc_session")),
     ("drc", _lazy("bench.drc")),
     ("scale", _lazy("bench.scale")),
     ("fleet", _lazy("bench.fleet")),
@@ -119,7 +120,7 @@ SUITES: list[tuple[str, Suite]] = [
 #: suites timed inside this one process, pinned to one CPU. The others run brokers, gateways and
 #: simulators as several processes, which inherit the affinity: pinned, 100 gateway processes and the
 #: broker would share one core of a two-core machine. They get every CPU, as deployed.
-PINNED = frozenset({"codecs"})
+PINNED = frozenset({"codecs", "drc_session"})
 
 
 # --------------------------------------------------------------------------- timing

@@ -130,9 +130,13 @@ class GatewayApp:
             main_bridge=self.bridge,
             publish_event=lambda method, data, need_reply: nb.event(gw, method, data, need_reply),
             publish_gateway_osd=nb.gateway_osd,
+            clock=self.clock,
         )
         northbound_holder["drc"] = self.drc
-        nb.drc_state = lambda: self.drc.drc_state if self.drc is not None else 0
+        self.drc.start()
+        drc = self.drc
+        nb.gateway_osd_data = drc.osd_data
+        nb.on_authority_lost = lambda sn: drc.refresh_targets()
         offline = (topic(TopicKind.STATUS, gw), self.northbound.topology(offline=True))
         self.bridge.set_will(*offline)
         self.dispatcher = Dispatcher(
@@ -165,6 +169,8 @@ class GatewayApp:
         self.stop_event.set()
 
     def _authority_changed(self) -> None:
+        if self.drc is not None:
+            self.drc.refresh_targets()
         if self.northbound is None:
             return
         for adapter in self.devices:
@@ -183,8 +189,11 @@ class GatewayApp:
     ) -> None:
         log.info("stopping: halting every motion first")
         if self.drc is not None:
-            with contextlib.suppress(Exception):
-                await self.drc.exit()
+            try:
+                await self.drc.shutdown()
+            except Exception:
+                self.metrics.inc("drc_stop_failures_total", reason="shutdown", device="-")
+                log.exception("stopping live control failed; stopping every device directly")
         await asyncio.gather(*(a.stop_motion() for a in self.devices), return_exceptions=True)
         consumer.cancel()
         with contextlib.suppress(asyncio.CancelledError):

@@ -60,6 +60,18 @@ FLIGHT_METHODS = frozenset({"takeoff_to_point", "fly_to_point", "fly_to_point_st
 _DRC_METHODS = frozenset({"drc_mode_enter", "drc_mode_exit"})
 #: No device may hold a reply longer than this: the reference cloud SDK resends after 3 s.
 MAX_DEADLINE = 2.8
+#: Services that stop motion: never refused for a parsing reason. When their ``data`` cannot be parsed
+#: (a cloud that sends ``"data": 5``), they run as if sent without parameters and are answered normally
+#: (``"data": {}``, ``""``, ``null`` and no ``data`` are already the same: schemas.envelope).
+STOP_METHODS = frozenset(
+    {
+        "drc_mode_exit",
+        "fly_to_point_stop",
+        "x_osdk_hotpoint_stop",
+        "x_osdk_followme_stop",
+        "x_robomaster_stop",
+    }
+)
 #: Services handled by the dispatcher itself rather than routed to one adapter's handler.
 _AUTHORITY_METHODS = frozenset({"flight_authority_grab", "payload_authority_grab"})
 
@@ -176,6 +188,10 @@ class Dispatcher:
         try:
             request = self.registry.validate(TopicKind.SERVICES, payload)
         except ValidationError as exc:
+            request = self._stop_despite(payload)
+            if request is not None:
+                await self._run_services(request)
+                return
             reply = error_reply_from_validation(
                 TopicKind.SERVICES, payload, exc, timestamp=self.clock.time_ms(), gateway=self.gateway_sn
             )
@@ -190,7 +206,28 @@ class Dispatcher:
                 log.info("rejected %s: %s", method, _reason_of(reply))
                 self._publish_reply(reply.model_dump_json().encode(), None)
             return
+        await self._run_services(request)
 
+    def _stop_despite(self, payload: bytes) -> Any:
+        """A stop service whose ``data`` broke the contract, read as one without parameters (None when
+        the message is not such a stop, or its tid/bid cannot be read)."""
+        method = _peek(_METHOD, payload)
+        if method not in STOP_METHODS:
+            return None
+        tid, bid = _peek(_TID, payload), _peek(_BID, payload)
+        if not (tid and bid):
+            return None
+        try:
+            request = self.registry.validate(
+                TopicKind.SERVICES, {"tid": tid, "bid": bid, "method": method, "data": {}}
+            )
+        except ValidationError:
+            return None
+        self.metrics.inc("services_stops_obeyed_total", method=method)
+        log.warning("obeyed %s although its data could not be parsed (a stop is never refused)", method)
+        return request
+
+    async def _run_services(self, request: Any) -> None:
         tid = request.tid
         # this task's log lines (the adapter's too) carry method and tid; a secret that arrived in the
         # request (drc_mode_enter's broker password) is masked in every log line from now on

@@ -1,30 +1,34 @@
-"""Live flight control (DRC): entering and leaving, sequence order, heartbeats, pushes, and the
-failsafe that always stops motion.
+"""Live flight control (DRC): the I/O around the sans-I/O session in :mod:`gateway.drc_session`.
 
-Owns the DRC session: the broker link named by ``drc_mode_enter`` (a dedicated paho client, or
-the main connection when it is the same broker), the ``drone_control`` set-point and its ``seq``
-rules, the heartbeat echo, the emergency-stop hold, and the set-point stream to every device under
-live control.
+Owns: the DRC broker link named by ``drc_mode_enter`` (a dedicated paho client, or the main
+connection when it is the same broker), turning ``drc/down`` messages into session events and the
+session's actions into ``drc/up`` replies, ``drc_status_notify`` events, the gateway osd, metrics
+and motion, the pushes (osd/hsi/delay), and the one thread that writes motion frames to devices.
+Must not know: how a decision is made (the session decides: states, seq rules, failsafes, the order
+of session changes), bytes on a device link (adapters encode), or Cloud API routing (dispatcher).
 
-Why this module has its own thread and lock (a deliberate exception to "one event loop owns all
-state", DESIGN.md): the stop path must not depend on the loop being idle, on the broker being up or
-on a device reply. So:
+Threads (see docs/architecture.md, "Runtime model"):
 
-* ``drc/down`` messages are handled **in paho's network thread** (the bridge's ``inline`` hook):
-  heartbeats are echoed at once and sticks update the set-point, even while the loop is flooded;
-* a **streaming thread** sends the current set-point to the devices at ``stream_hz`` (the flight
-  controller needs a stream; the cloud sends 5–20 Hz) and zeroes it when sticks stop
-  (``stick_timeout``), when heartbeats stop (``heartbeat_timeout``, then 514301) or on an
-  emergency stop. Device ``drive``/``emergency_stop`` calls only encode a frame and queue it on the
-  link's writer thread, so a stalled device cannot hold the thread either;
-* everything else (entering, leaving, events, the osd/hsi/delay pushes) runs in the loop.
+* **paho's network thread(s)** (the main connection's, and the dedicated DRC link's) parse
+  ``drc/down`` and feed the session at once: heartbeats are echoed from there and a stick updates
+  the set-point, even while the event loop is flooded;
+* the **motion writer** (``drc-writer``, one per gateway, :class:`MotionWriter`) is the only thread
+  that sends live-control frames (``drive``/``emergency_stop``) to devices. Every other path only
+  changes the set-point it holds and wakes it; it also ticks the session every control period
+  (``1/stream_hz``), which applies the stick and heartbeat timeouts;
+* the **event loop** feeds ``drc_mode_enter``/``drc_mode_exit``, link outcomes, authority changes and
+  shutdown, opens and closes DRC links, publishes events/osd and runs the pushes.
 
-A flood of ``drone_control`` (a cloud bug, a stuck key repeat) must not starve heartbeats: every
-message costs the network thread a parse, a reply and a device frame, so past ``max_stick_rate``
-sticks are dropped *before* they are parsed (a byte match on the method, counted as
-``drc_rejected_total{reason="rate"}``), which keeps the thread reading far beyond any real stick
-rate; heartbeats and emergency stops never count against the budget. The devices see at most that
-rate plus the stream. (Past what paho itself can read, the backlog is the broker's: docs/drc.md.)
+One lock serialises every call into the session; actions are carried out in the order the session
+returned them. Whatever must run in the loop (events, link changes, request answers) is scheduled with
+``call_soon_threadsafe`` *under that lock*, so the loop sees them in the session's order whichever
+thread produced them.
+
+A flood of ``drone_control`` (a cloud bug, a stuck key repeat) must not starve heartbeats: past
+``max_stick_rate`` sticks are dropped *before* they are parsed (a byte match on the method, counted as
+``drc_rejected_total{reason="rate"}``); heartbeats and emergency stops never count against the
+budget. An emergency stop is never refused for a parsing reason: a ``drc/down`` message whose method
+reads ``drone_emergency_stop`` stops every device whatever its ``data``.
 
 Sticks are the seed's: ``x`` lateral (+ left), ``y`` longitudinal (+ forward), ``h`` vertical
 (+ up), ``w`` yaw rate (+ clockwise); ``x_sign``, ``y_sign`` and ``swap_xy`` adapt clouds that
@@ -35,16 +39,20 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import hashlib
 import logging
 import re
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from pydantic import ValidationError
 
 from adapters.base import Adapter
+from gateway import drc_session as ds
+from gateway.clock import Clock, SystemClock
 from gateway.devices import DeviceTable
 from gateway.metrics import Metrics
 from gateway.mqtt import MqttBridge
@@ -55,11 +63,154 @@ from schemas.registry import Registry
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DrcController"]
+__all__ = ["DrcController", "MotionWriter"]
 
-ZERO = (0.0, 0.0, 0.0, 0.0)
+ZERO = ds.ZERO
 #: how a drone_control is recognised before it is parsed (whatever the spacing around the colon)
 _STICK = re.compile(rb'"method"\s*:\s*"drone_control"')
+_ESTOP = re.compile(rb'"method"\s*:\s*"drone_emergency_stop"')
+
+
+@dataclass(frozen=True, slots=True)
+class _Down:
+    """A drc/down request as the session sees it: answered on the link it came in on. ``message`` is
+    None for an emergency stop that could not be parsed (answered with a reply built by hand)."""
+
+    via: MqttBridge
+    message: Any
+
+
+#: the failsafe reasons reported in metrics and in the gateway osd (``x_drc_failsafe``)
+FAILSAFES = ("sticks", "heartbeat", "emergency_stop", "link_lost", "authority")
+
+
+class MotionWriter:
+    """The one thread that sends live-control frames to devices.
+
+    It holds the set-point (:meth:`set`) and an emergency-stop request (:meth:`emergency`), which any
+    thread may change; it sends a changed set-point at once (one thread hand-off: stick-to-wire is one
+    frame), and the streamed set-point every ``period``. Before each periodic send it calls ``tick``
+    (the session's timeouts), so a loss is acted on within one period. A device call that raises is
+    counted and logged by ``on_failure``, never swallowed; it cannot stop the stream to other devices.
+    """
+
+    def __init__(
+        self,
+        *,
+        period: float,
+        devices: Callable[[], Sequence[Adapter]],
+        targets: Callable[[], Sequence[Adapter]],
+        tick: Callable[[float], None],
+        now: Callable[[], float],
+        on_failure: Callable[[Adapter, str, BaseException], None],
+        on_sent: Callable[[float], None] | None = None,
+    ) -> None:
+        self.period = period
+        self._devices = devices
+        self._targets = targets
+        self._tick = tick
+        self._now = now
+        self._on_failure = on_failure
+        self._on_sent = on_sent
+        self._cond = threading.Condition(threading.Lock())
+        self._setpoint: ds.SetPoint = ZERO
+        self._stream = False
+        self._dirty = False
+        self._since: float | None = None
+        self._estop = False
+        self._stopping = False
+        self._thread: threading.Thread | None = None
+        self.frames_sent = 0  # drive() calls that went out (tests, /status)
+
+    # -- any thread ------------------------------------------------------------------------------
+    def set(self, setpoint: ds.SetPoint, stream: bool, since: float | None = None) -> None:
+        with self._cond:
+            self._setpoint, self._stream, self._dirty, self._since = setpoint, stream, True, since
+            self._cond.notify()
+        if threading.current_thread() is not self._thread:
+            time.sleep(0)  # hand the interpreter to the writer now: the frame goes out before the reply
+
+    def emergency(self) -> None:
+        with self._cond:
+            self._estop = True
+            self._cond.notify()
+
+    @property
+    def streaming(self) -> bool:
+        return self._stream
+
+    @property
+    def setpoint(self) -> ds.SetPoint:
+        return self._setpoint
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="drc-writer", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        """Send what is pending (the final zero), then end the thread."""
+        with self._cond:
+            self._stopping = True
+            self._cond.notify()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+
+    # -- the writer thread -----------------------------------------------------------------------
+    def _run(self) -> None:
+        next_tick = self._now() + self.period
+        while True:
+            with self._cond:
+                while not (self._dirty or self._estop or self._stopping):
+                    left = next_tick - self._now()
+                    if left <= 0:
+                        break
+                    self._cond.wait(left)
+                stopping = self._stopping
+            now = self._now()
+            periodic = False
+            if now >= next_tick and not stopping:
+                next_tick = max(next_tick + self.period, now + self.period / 2)
+                periodic = True
+                try:
+                    self._tick(now)
+                except Exception as exc:  # the session is pure; a failure here is a bug, not a device
+                    log.exception("DRC tick failed")
+                    self._on_failure_safe(None, "tick", exc)
+            with self._cond:
+                setpoint, stream, dirty, since, estop = (
+                    self._setpoint, self._stream, self._dirty, self._since, self._estop
+                )  # fmt: skip
+                self._dirty = self._estop = False
+                self._since = None
+            if estop:
+                for adapter in self._devices():
+                    try:
+                        adapter.emergency_stop()
+                    except Exception as exc:
+                        self._on_failure_safe(adapter, "emergency_stop", exc)
+            if dirty or (periodic and stream):
+                self.write(setpoint)
+                if since is not None and self._on_sent is not None:
+                    self._on_sent(since)
+            if stopping:
+                with self._cond:
+                    if not (self._dirty or self._estop):
+                        return
+
+    def write(self, setpoint: ds.SetPoint) -> None:
+        for adapter in self._targets():
+            try:
+                adapter.drive(*setpoint)
+                self.frames_sent += 1
+            except Exception as exc:
+                self._on_failure_safe(adapter, "stop" if setpoint == ZERO else "drive", exc)
+
+    def _on_failure_safe(self, adapter: Adapter | None, what: str, exc: BaseException) -> None:
+        try:
+            self._on_failure(adapter, what, exc)  # type: ignore[arg-type]
+        except Exception:
+            log.exception("DRC failure hook failed")
 
 
 class DrcController:
@@ -74,7 +225,8 @@ class DrcController:
         main_bridge: MqttBridge,
         publish_event: Callable[[str, dict[str, Any], bool], None],
         publish_gateway_osd: Callable[[dict[str, Any]], None],
-        now: Callable[[], float] = time.monotonic,
+        clock: Clock | None = None,
+        link_factory: Callable[..., MqttBridge] = MqttBridge,
     ) -> None:
         self.settings = settings
         self.cfg = settings.drc
@@ -86,74 +238,204 @@ class DrcController:
         self.main_bridge = main_bridge
         self.publish_event = publish_event
         self.publish_gateway_osd = publish_gateway_osd
-        self.now = now
+        self.clock = clock or SystemClock()
+        self.now = self.clock.monotonic
+        self._link_factory = link_factory
         self.down_topic = topic(TopicKind.DRC_DOWN, self.gw)
         self.up_topic = topic(TopicKind.DRC_UP, self.gw)
-        self._lock = threading.Lock()
-        # -- state shared with the network and streaming threads (under _lock) --
-        self.active = False
-        self.drc_state = 0
-        self.last_seq: int | None = None
-        self.setpoint: tuple[float, float, float, float] = ZERO  # forward, right, up, yaw rate
-        self.last_stick = float("-inf")
-        self.last_heartbeat = float("-inf")
-        self.estop = False
-        self.stopped_for_heartbeat = False
-        self._stick_received: float | None = None
-        self.cmd_delay_ms = 0.0
-        # -- network thread only --
-        self._stick_budget = self._new_stick_budget()
-        # -- loop-owned --
-        self._bridge: MqttBridge | None = None  # dedicated DRC connection, None when reusing main
-        self._up: MqttBridge = main_bridge
-        self._stream_stop = threading.Event()
-        self._stream_thread: threading.Thread | None = None
+        self.session = ds.DrcSession(
+            ds.SessionConfig(
+                stick_timeout=self.cfg.stick_timeout,
+                heartbeat_timeout=self.cfg.heartbeat_timeout,
+                idle_timeout=self.cfg.idle_timeout,
+            )
+        )
+        self._lock = threading.Lock()  # every call into the session, and the actions it returns
+        self._stick_budget = self._new_stick_budget()  # network threads only
+        self._up: MqttBridge = main_bridge  # where the current session answers
+        self._links: dict[int, MqttBridge | None] = {}  # session id -> its dedicated link (None: main)
+        self._opening: dict[int, asyncio.Task[None]] = {}
+        self._closing: set[asyncio.Task[None]] = set()
+        self._targets: tuple[Adapter, ...] = ()
         self._push_task: asyncio.Task[None] | None = None
+        self._pending_broker: dict[Any, Any] = {}  # link key -> drc_mode_enter's mqtt_broker, until opened
+        self._failure_logged: dict[tuple[str, str], float] = {}
+        self.cmd_delay_ms = 0.0
         self.osd_hz = 10
         self.hsi_hz = 1
+        #: the failsafe that fired last and when it first fired (wall clock, ms); None: none holds
+        self.failsafe: tuple[str, int] | None = None
+        self.writer = MotionWriter(
+            period=1.0 / self.cfg.stream_hz,
+            devices=lambda: list(self.devices),
+            targets=lambda: self._targets,
+            tick=self._tick,
+            now=self.now,
+            on_failure=self._device_failure,
+            on_sent=self._measured,
+        )
 
-    # ------------------------------------------------------------------------------- enter / exit (loop)
+    def start(self) -> None:
+        """Start the motion writer (the app does, once; a controller that is never started drives nothing)."""
+        self.writer.start()
+
+    # ------------------------------------------------------------------------------- observers
+    @property
+    def drc_state(self) -> int:
+        return self.session.drc_state
+
+    @property
+    def active(self) -> bool:
+        return self.session.state in (ds.State.ACTIVE, ds.State.HOLDING)
+
+    @property
+    def dedicated_link(self) -> MqttBridge | None:
+        """The current session's own DRC broker connection; None when it rides the main one (or none)."""
+        sid = self.session.session_id
+        return self._links.get(sid) if sid is not None else None
+
+    def snapshot(self) -> dict[str, Any]:
+        """Live control for ``/status``."""
+        with self._lock:
+            view = self.session.snapshot(self.now())
+        forward, right, up, yaw = self.writer.setpoint
+        return {
+            "state": self.session.drc_state,
+            "active": self.active,
+            "broker": "dedicated" if self.dedicated_link is not None else "main",
+            **view,
+            "setpoint": {"forward": forward, "right": right, "up": up, "yaw_rate": yaw},
+            "streaming": self.writer.streaming,
+            "emergency_stop": "emergency_stop" in str(view["hold"]),
+            "stopped_for_heartbeat": "heartbeat" in str(view["hold"]),
+            "command_delay_ms": round(float(self.cmd_delay_ms), 1),
+        }
+
+    # ------------------------------------------------------------------- the one way in (any thread)
+    def _feed(self, event: ds.Event) -> list[ds.Action]:
+        with self._lock:
+            actions = self.session.handle(event)
+            for action in actions:
+                try:
+                    self._carry_out(action)
+                except Exception:
+                    self.metrics.inc("handler_exceptions_total", where="drc_action")
+                    log.exception("DRC: could not carry out %s", type(action).__name__)
+            return actions
+
+    def _carry_out(self, action: ds.Action) -> None:
+        if isinstance(action, ds.Motion):
+            self.writer.set(action.setpoint, action.stream, action.since if action.setpoint != ZERO else None)
+        elif isinstance(action, ds.EmergencyStop):
+            self.writer.emergency()
+        elif isinstance(action, ds.StickReply):
+            self._answer_down(action)
+        elif isinstance(action, ds.Report):
+            if action.drc_state == 2:
+                self.metrics.inc("drc_sessions_total")
+            self._in_loop(self._report, action.drc_state, action.result)
+        elif isinstance(action, ds.Notify):
+            self._in_loop(self._notify, action.drc_state, action.result)
+        elif isinstance(action, ds.Reply):
+            self._in_loop(self._resolve, action.request, action.result, action.reason)
+        elif isinstance(action, ds.OpenLink):
+            self._in_loop(self._spawn_open, action.session, action.link)
+        elif isinstance(action, ds.CloseLink):
+            self._in_loop(self._spawn_close, action.session)
+        elif isinstance(action, ds.Failsafe):
+            self._failsafe(action)
+        elif isinstance(action, ds.Count):
+            if action.reason == "not_entered":
+                self.metrics.inc("inbound_rejected_total", reason="drc_not_entered")
+            else:
+                self.metrics.inc("drc_rejected_total", reason=action.reason)
+
+    def _in_loop(self, fn: Callable[..., Any], *args: Any) -> None:
+        with contextlib.suppress(RuntimeError):  # the loop closed during shutdown: nobody to tell
+            self.loop.call_soon_threadsafe(fn, *args)
+
+    # ------------------------------------------------------------------- enter / exit (the loop)
     async def enter(self, data: Any) -> tuple[int, dict[str, Any] | None]:
         broker = data.mqtt_broker
-        if broker.expire_time and broker.expire_time < time.time():
+        if broker.expire_time and broker.expire_time < self.clock.time_ms() / 1000:
             return ResultCode.INVALID_PARAMETERS, {"reason": "mqtt_broker credentials already expired"}
         denied = self._authority_problem()
         if denied is not None:
             return denied
-        self.osd_hz, self.hsi_hz = int(data.osd_frequency), int(data.hsi_frequency)
-        if self.active:
-            await self._close_link()
-        self._set_state(1, 0)
         host, _, port_text = broker.address.rpartition(":")
         host = host.strip("[]")
         main = self.settings.broker
-        same = (host, int(port_text)) == (main.host, main.port) and broker.enable_tls == main.tls
-        if same:
-            self._bridge, self._up = None, self.main_bridge
-        else:
-            result = await self._connect(host, int(port_text), broker)
-            if result != 0:
-                self._set_state(0, result)
-                return result, {"reason": "could not connect to the DRC broker"}
-        with self._lock:
-            now = self.now()
-            self.active = True
-            self.last_seq = None
-            self.setpoint = ZERO
-            self.last_stick = float("-inf")
-            self.last_heartbeat = now  # the session starts alive: the idle limit counts from here
-            self.estop = False
-            self.stopped_for_heartbeat = False
-            self._stick_budget = self._new_stick_budget()
-        self._start_stream()
-        self._push_task = self.loop.create_task(self._pushes(), name="drc-pushes")
-        self._set_state(2, 0)
-        self.metrics.inc("drc_sessions_total")
-        log.info("DRC session started (%s broker)", "main" if same else "dedicated")
-        return ResultCode.SUCCESS, None
+        dedicated = not ((host, int(port_text)) == (main.host, main.port) and broker.enable_tls == main.tls)
+        secret = hashlib.sha256(broker.password.get_secret_value().encode()).hexdigest()
+        key = (host, int(port_text), bool(broker.enable_tls), broker.client_id, broker.username, secret)
+        link = ds.LinkSpec(key=key, dedicated=dedicated)
+        self._pending_broker[key] = broker
+        future: asyncio.Future[tuple[int, str | None]] = self.loop.create_future()
+        self.refresh_targets()
+        self._feed(ds.Enter(self.now(), future, link))
+        result, reason = await future
+        if result == 0:
+            self.osd_hz, self.hsi_hz = int(data.osd_frequency), int(data.hsi_frequency)
+            return ResultCode.SUCCESS, None
+        return result, {"reason": reason or "could not enter live flight control"}
 
-    async def _connect(self, host: str, port: int, broker: Any) -> int:
+    async def exit(self) -> tuple[int, dict[str, Any] | None]:
+        """Leave DRC: motion stopped first, then drc_state 0; answered once the link is closed."""
+        future: asyncio.Future[tuple[int, str | None]] = self.loop.create_future()
+        self._feed(ds.Exit(self.now(), future))
+        result, reason = await future
+        return result, ({"reason": reason} if reason else None)
+
+    async def shutdown(self) -> None:
+        """Gateway stop: motion zeroed, session ended, every link closed, the writer's last frame out."""
+        self._feed(ds.Shutdown(self.now()))
+        for _ in range(3):  # closes may be scheduled by the actions just carried out
+            await asyncio.sleep(0)
+            pending = [*self._opening.values(), *self._closing]
+            if pending:
+                await asyncio.gather(*pending, return_exceptions=True)
+        if self._push_task is not None:
+            self._push_task.cancel()
+            self._push_task = None
+        await asyncio.to_thread(self.writer.stop)
+
+    def _resolve(self, future: Any, result: int, reason: str | None) -> None:
+        if isinstance(future, asyncio.Future) and not future.done():
+            future.set_result((result, reason))
+
+    # -- links (the loop) -----------------------------------------------------------------------
+    def _spawn_open(self, session: int, link: ds.LinkSpec) -> None:
+        self._opening[session] = self.loop.create_task(self._open(session, link), name=f"drc-open-{session}")
+
+    async def _open(self, session: int, link: ds.LinkSpec) -> None:
+        try:
+            if self._closing:  # the session guarantees the order; this only makes sure the sockets are gone
+                await asyncio.gather(*list(self._closing), return_exceptions=True)
+            if not link.dedicated:
+                self._links[session] = None
+                self._up = self.main_bridge
+                self.refresh_targets()
+                self._feed(ds.LinkUp(self.now(), session))
+                return
+            broker = self._pending_broker.pop(link.key, None)
+            if broker is None:  # pragma: no cover - every dedicated OpenLink follows an enter that stored it
+                self._feed(ds.LinkFailed(self.now(), session, int(ResultCode.DRC_MQTT_ERROR)))
+                return
+            bridge, result = await self._connect(session, broker)
+            if bridge is None:
+                self._feed(ds.LinkFailed(self.now(), session, result))
+                return
+            self._links[session] = bridge
+            self._up = bridge
+            self.refresh_targets()
+            self._feed(ds.LinkUp(self.now(), session))
+        finally:
+            self._opening.pop(session, None)
+
+    async def _connect(self, session: int, broker: Any) -> tuple[MqttBridge | None, int]:
         main = self.settings.broker
+        host, _, port_text = broker.address.rpartition(":")
+        host, port = host.strip("[]"), int(port_text)
         scheme = "mqtts" if broker.enable_tls else "mqtt"
         settings = BrokerSettings(
             url=f"{scheme}://{host}:{port}",
@@ -167,76 +449,67 @@ class DrcController:
             reconnect_max=main.reconnect_max,
             session_expiry=0,
         )
-        bridge = MqttBridge(
+        bridge = self._link_factory(
             settings,
             client_id=broker.client_id,
             subscriptions=[(self.down_topic, 0)],
             loop=self.loop,
             metrics=self.metrics,
             name="drc",
-            inline=self._inline_dedicated,
-            on_disconnected=self._link_lost,
+            inline=lambda topic_name, payload: self._inline_dedicated(session, topic_name, payload),
+            on_disconnected=lambda reason: self._link_lost(session, reason),
         )
         bridge.start()
-        deadline = self.loop.time() + self.cfg.enter_timeout
-        while self.loop.time() < deadline:
-            if bridge.subscribed:
-                self._bridge, self._up = bridge, bridge
-                return 0
-            if bridge.last_refusal is not None:
-                break
-            await asyncio.sleep(0.02)
+        deadline = self.now() + self.cfg.enter_timeout
+        try:
+            while self.now() < deadline:
+                if bridge.subscribed:
+                    return bridge, 0
+                if bridge.last_refusal is not None:
+                    break
+                await asyncio.sleep(0.02)
+        except asyncio.CancelledError:
+            await asyncio.to_thread(bridge.stop)
+            raise
         refused = bridge.last_refusal is not None
         await asyncio.to_thread(bridge.stop)
-        log.warning(
-            "DRC broker %s:%d: %s", host, port, "refused the connection" if refused else "unreachable"
-        )
-        return ResultCode.DRC_LINK_REFUSED if refused else ResultCode.DRC_MQTT_ERROR
+        why = "refused the connection" if refused else "unreachable"
+        log.warning("DRC broker %s:%d: %s", host, port, why)
+        return None, int(ResultCode.DRC_LINK_REFUSED if refused else ResultCode.DRC_MQTT_ERROR)
 
-    async def exit(self, result: int = 0) -> tuple[int, dict[str, Any] | None]:
-        """Leave DRC: motion stopped first, then drc_state 0."""
-        if not self.active:
-            return ResultCode.SUCCESS, None
-        self._stop_motion_now()
-        with self._lock:
-            self.active = False
-        self._stream_stop.set()
-        if self._stream_thread is not None:
-            await asyncio.to_thread(self._stream_thread.join, 2.0)
-            self._stream_thread = None
-        if self._push_task is not None:
-            self._push_task.cancel()
-            self._push_task = None
-        await self._close_link()
-        self._set_state(0, result)
-        log.info("DRC session ended (result %s)", result)
-        return ResultCode.SUCCESS, None
+    def _spawn_close(self, session: int) -> None:
+        task = self.loop.create_task(self._close(session), name=f"drc-close-{session}")
+        self._closing.add(task)
+        task.add_done_callback(self._closing.discard)
 
-    async def _close_link(self) -> None:
-        bridge, self._bridge, self._up = self._bridge, None, self.main_bridge
+    async def _close(self, session: int) -> None:
+        opening = self._opening.get(session)
+        if opening is not None:  # shut down while connecting: stop trying
+            opening.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await opening
+        bridge = self._links.pop(session, None)
+        if self._up is bridge or bridge is None:
+            self._up = self.main_bridge
         if bridge is not None:
-            await asyncio.to_thread(bridge.stop)
-
-    def _set_state(self, state: int, result: int) -> None:
-        self.drc_state = state
-        self.publish_event("drc_status_notify", {"result": int(result), "drc_state": state}, True)
-        self.publish_gateway_osd({"drc_state": state})
+            try:
+                await asyncio.to_thread(bridge.stop)
+            except Exception:
+                log.exception("DRC: closing the link of session %d failed", session)
+        self._feed(ds.LinkClosed(self.now(), session))
 
     def main_link_lost(self, reason: str) -> None:
-        """The main connection dropped (its network thread). A session riding it has lost its DRC broker just
-        as a dedicated one would; a session on a dedicated broker is not concerned."""
-        if self.active and self._bridge is None:
-            self._link_lost(reason)
+        """The main connection dropped (its network thread): a session riding it lost its DRC broker."""
+        sid = self.session.session_id
+        if sid is not None and self._links.get(sid, 0) is None:
+            self._link_lost(sid, reason)
 
-    def _link_lost(self, reason: str) -> None:
-        """The DRC connection dropped (network thread): stop at once, then end the session."""
-        if not self.active:
-            return
-        self._stop_motion_now()
-        self.metrics.inc("drc_failsafe_stops_total", reason="link_lost")
-        with contextlib.suppress(RuntimeError):
-            self.loop.call_soon_threadsafe(lambda: self.loop.create_task(self.exit(ResultCode.DRC_LINK_LOST)))
+    def _link_lost(self, session: int, reason: str) -> None:
+        """A DRC connection dropped (its network thread): the session stops at once and ends."""
+        log.warning("DRC link of session %d lost: %s", session, reason)
+        self._feed(ds.BrokerLost(self.now(), session))
 
+    # -- authority (the loop) -------------------------------------------------------------------
     def _authority_problem(self) -> tuple[int, dict[str, Any]] | None:
         movable = [a for a in self.devices if a.info.domain != "1"]
         auth = self.devices.authority
@@ -246,186 +519,179 @@ class DrcController:
             return ResultCode.NO_PAYLOAD_AUTHORITY, {"reason": "grab payload authority first"}
         return None
 
-    def _targets(self) -> list[Adapter]:
+    def refresh_targets(self) -> None:
+        """Recompute which devices live control drives (after any authority change). A device that
+        lost its authority during a session is a failsafe: the set-point is zeroed."""
         auth = self.devices.authority
-        return [
+        targets = tuple(
             a
             for a in self.devices
             if (a.info.domain != "1" and a.info.sn in auth.flight)
             or (a.info.domain == "1" and a.info.payload_index in auth.payloads)
-        ]
+        )
+        lost = [a for a in self._targets if a not in targets]
+        self._targets = targets
+        if lost:
+            self._feed(ds.AuthorityLost(self.now()))
 
-    # ------------------------------------------------------------------------ drc/down (network thread)
+    # --------------------------------------------------------------- drc/down (network threads)
     def inline_main(self, topic_name: str, payload: bytes) -> bool:
-        """The main bridge's hook: consume drc/down while a session uses the main connection."""
+        """The main bridge's hook: consume drc/down (answered here while a session rides the main link)."""
         if topic_name != self.down_topic:
             return False
-        if not self.active or self._bridge is not None:
-            self.metrics.inc("inbound_rejected_total", reason="drc_not_entered")
-            return True
-        self.handle_down(payload)
+        sid = self.session.session_id
+        riding = sid is not None and self._links.get(sid, 0) is None
+        self.handle_down(payload, sid if riding else None, self.main_bridge)
         return True
 
-    def _inline_dedicated(self, topic_name: str, payload: bytes) -> bool:
-        if topic_name == self.down_topic and self.active:
-            self.handle_down(payload)
+    def _inline_dedicated(self, session: int, topic_name: str, payload: bytes) -> bool:
+        if topic_name == self.down_topic:
+            bridge = self._links.get(session)
+            self.handle_down(payload, session, bridge if bridge is not None else self._up)
         return True
-
-    def _publish_up(self, message: Any) -> None:
-        self._up.publish(self.up_topic, message.model_dump_json().encode(), qos=0)
 
     def _new_stick_budget(self) -> TokenBucket:
         rate = self.cfg.max_stick_rate
         return TokenBucket(rate, burst=max(10.0, rate / 5), now=self.now())
 
-    def handle_down(self, payload: bytes) -> None:
-        if _STICK.search(payload) is not None and not self._stick_budget.take(self.now()):
+    def handle_down(self, payload: bytes, session: int | None, via: MqttBridge) -> None:
+        """One drc/down message from the link ``via``; ``session``: the session that link belongs to
+        (None: no current session rides it)."""
+        now = self.now()
+        if _STICK.search(payload) is not None and not self._stick_budget.take(now):
             self.metrics.inc("drc_rejected_total", reason="rate")
             return
         try:
             request = self.registry.validate(TopicKind.DRC_DOWN, payload)
         except ValidationError as exc:
+            if _ESTOP.search(payload) is not None:  # a stop is never refused for a parsing reason
+                self.metrics.inc("drc_rejected_total", reason="invalid_stop_obeyed")
+                self._feed(ds.EStop(now, session, _Down(via, None)))
+                return
             self.metrics.inc("drc_rejected_total", reason="invalid")
-            reply = error_reply_from_validation(TopicKind.DRC_DOWN, payload, exc)
-            if reply is not None:
-                self._publish_up(reply)
+            if session is not None and session == self.session.session_id:
+                reply = error_reply_from_validation(TopicKind.DRC_DOWN, payload, exc)
+                if reply is not None:
+                    via.publish(self.up_topic, reply.model_dump_json().encode(), qos=0)
             return
         method = request.method
         if method == "heart_beat":
-            self._publish_up(echo_heart_beat(request))
-            with self._lock:
-                self.last_heartbeat = self.now()
-                recovered = self.stopped_for_heartbeat
-                self.stopped_for_heartbeat = False
-            self.metrics.inc("drc_heartbeats_total")
-            if recovered:
-                self._notify_from_thread(0)
+            self._feed(ds.Heartbeat(now, session, _Down(via, request)))
         elif method == "drone_control":
-            result, output = self._stick(request.data)
-            if result == ResultCode.SUCCESS:
-                # on the wire now, not at the next stream tick: stick-to-wire latency is one frame.
-                # Never while a failsafe holds the vehicle: the stream thread owns the zero set-point then.
-                with self._lock:
-                    setpoint = self.setpoint
-                    halted = self.estop or self.stopped_for_heartbeat
-                for adapter in [] if halted else self._targets():
-                    with contextlib.suppress(Exception):
-                        adapter.drive(*setpoint)
-            if result is not None:
-                self._publish_up(reply_for(request, int(result), output))
+            problem = self._authority_problem()
+            self._feed(
+                ds.Stick(
+                    now,
+                    session,
+                    _Down(via, request),
+                    int(request.data.seq),
+                    self._to_body(request.data),
+                    authorized=problem is None,
+                    denied_result=int(problem[0]) if problem is not None else 0,
+                )
+            )
         elif method == "drone_emergency_stop":
-            self._emergency_stop()
-            self._publish_up(reply_for(request, ResultCode.SUCCESS))
+            self._feed(ds.EStop(now, session, _Down(via, request)))
 
-    def _stick(self, data: Any) -> tuple[int | None, dict[str, Any] | None]:
-        """Apply one drone_control; returns the reply (None: a repeat, ignored)."""
-        seq = int(data.seq)
-        if self._authority_problem() is not None:
-            self.metrics.inc("drc_rejected_total", reason="authority")
-            return ResultCode.NO_FLIGHT_AUTHORITY, {"seq": seq}
-        forward, right, up, yaw = self._to_body(data)
-        with self._lock:
-            if seq != 0 and self.last_seq is not None:
-                if seq < self.last_seq:
-                    self.metrics.inc("drc_rejected_total", reason="seq")
-                    return ResultCode.DRC_SEQ_TOO_OLD, {"seq": seq}
-                if seq == self.last_seq:
-                    return None, None  # clouds publish each DRC message several times at QoS 0
-            if self.estop and seq != 0:
-                return ResultCode.BUSY, {"seq": seq, "reason": "emergency stop holds until seq restarts at 0"}
-            self.estop = False
-            self.last_seq = seq
-            self.setpoint = (forward, right, up, yaw)
-            self.last_stick = self.now()
-            self._stick_received = self.last_stick
-        self.metrics.inc("drc_sticks_total")
-        return ResultCode.SUCCESS, {"seq": seq}
-
-    def _to_body(self, data: Any) -> tuple[float, float, float, float]:
+    def _to_body(self, data: Any) -> ds.SetPoint:
         x, y = float(data.x) * self.cfg.x_sign, float(data.y) * self.cfg.y_sign
         if self.cfg.swap_xy:  # x forward, y right
             return (x, y, float(data.h), float(data.w))
         return (y, -x, float(data.h), float(data.w))  # seed: +x left, +y forward
 
-    def _emergency_stop(self) -> None:
-        with self._lock:
-            self.estop = True
-            self.setpoint = ZERO
-        self.metrics.inc("drc_failsafe_stops_total", reason="emergency_stop")
-        for adapter in self.devices:
-            with contextlib.suppress(Exception):
-                adapter.emergency_stop()
+    def _answer_down(self, action: ds.StickReply) -> None:
+        token = action.request
+        assert isinstance(token, _Down)
+        request = token.message
+        if request is None:  # an emergency stop that could not be parsed, obeyed all the same
+            body = b'{"method":"drone_emergency_stop","data":{"result":%d}}' % action.result
+            token.via.publish(self.up_topic, body, qos=0)
+            return
+        method = request.method
+        if method == "heart_beat":
+            self.metrics.inc("drc_heartbeats_total")
+            reply = echo_heart_beat(request)
+        else:
+            output: dict[str, Any] | None = None
+            if method == "drone_control":
+                output = {"seq": action.seq}
+                if action.reason:
+                    output["reason"] = action.reason
+                if action.result == 0:
+                    self.metrics.inc("drc_sticks_total")
+            elif action.reason:
+                output = {"reason": action.reason}
+            reply = reply_for(request, int(action.result), output)
+        token.via.publish(self.up_topic, reply.model_dump_json().encode(), qos=0)
 
-    def _stop_motion_now(self) -> None:
-        """Zero every driven device at once, from whichever thread notices."""
-        with self._lock:
-            self.setpoint = ZERO
-        for adapter in self._targets():
-            with contextlib.suppress(Exception):
-                adapter.drive(*ZERO)
+    # ------------------------------------------------------------------------- writer thread
+    def _tick(self, now: float) -> None:
+        self._feed(ds.Tick(now))
 
-    def _notify_from_thread(self, result: int) -> None:
-        with contextlib.suppress(RuntimeError):
-            self.loop.call_soon_threadsafe(
-                self.publish_event,
-                "drc_status_notify",
-                {"result": int(result), "drc_state": self.drc_state},
-                True,
-            )
+    def _measured(self, since: float) -> None:
+        delay = (self.now() - since) * 1000.0
+        self.cmd_delay_ms = delay if self.cmd_delay_ms == 0 else 0.8 * self.cmd_delay_ms + 0.2 * delay
 
-    # ------------------------------------------------------------------------------ streaming thread
-    def _start_stream(self) -> None:
-        self._stream_stop = threading.Event()
-        self._stream_thread = threading.Thread(target=self._stream, name="drc-stream", daemon=True)
-        self._stream_thread.start()
+    def _device_failure(self, adapter: Adapter | None, what: str, exc: BaseException) -> None:
+        device = adapter.info.sn if adapter is not None else "-"
+        reason = f"{what}:{type(exc).__name__}"
+        if what in ("stop", "emergency_stop", "tick"):
+            self.metrics.inc("drc_stop_failures_total", reason=reason, device=device)
+        else:
+            self.metrics.inc("drc_drive_failures_total", reason=reason, device=device)
+        key = (device, reason)
+        now = self.now()
+        # every failure is counted; the log says it once per device and reason every 5 s
+        if now - self._failure_logged.get(key, float("-inf")) >= 5.0:
+            self._failure_logged[key] = now
+            log.error("DRC: %s failed on device %s: %s: %s", what, device, type(exc).__name__, exc)
 
-    def _stream(self) -> None:
-        period = 1.0 / self.cfg.stream_hz
-        stop = self._stream_stop
-        zeroed_for_sticks = True
-        while not stop.wait(period):
-            now = self.now()
-            with self._lock:
-                if not self.active:
-                    return
-                setpoint = self.setpoint
-                stick_age = now - self.last_stick
-                hb_age = now - self.last_heartbeat
-                lost_heartbeat = hb_age > self.cfg.heartbeat_timeout and not self.stopped_for_heartbeat
-                if lost_heartbeat:
-                    self.stopped_for_heartbeat = True
-                halted = self.estop or self.stopped_for_heartbeat
-                received, self._stick_received = self._stick_received, None
-            if stick_age > self.cfg.stick_timeout or halted:
-                if not zeroed_for_sticks and not halted:
-                    self.metrics.inc("drc_failsafe_stops_total", reason="sticks")
-                zeroed_for_sticks = True
-                setpoint = ZERO
-            else:
-                zeroed_for_sticks = False
-            for adapter in self._targets():
-                with contextlib.suppress(Exception):
-                    adapter.drive(*setpoint)
-            if received is not None:
-                delay = (self.now() - received) * 1000.0
-                self.cmd_delay_ms = delay if self.cmd_delay_ms == 0 else 0.8 * self.cmd_delay_ms + 0.2 * delay
-            if lost_heartbeat:
-                log.warning("DRC: no heartbeat for %.1fs: motion stopped", hb_age)
-                self.metrics.inc("drc_failsafe_stops_total", reason="heartbeat")
-                self._notify_from_thread(ResultCode.DRC_HEARTBEAT_TIMEOUT)
-            if hb_age > self.cfg.idle_timeout:
-                log.warning("DRC: no heartbeat for %.0fs: leaving live control", hb_age)
-                with contextlib.suppress(RuntimeError):
-                    self.loop.call_soon_threadsafe(
-                        lambda: self.loop.create_task(self.exit(ResultCode.DRC_HEARTBEAT_TIMEOUT))
-                    )
-                return
+    # -------------------------------------------------------------- events and osd (the loop)
+    def _failsafe(self, action: ds.Failsafe) -> None:
+        if action.reason is None:
+            self.failsafe = None
+        else:
+            if action.fired:
+                self.metrics.inc("drc_failsafe_stops_total", reason=action.reason)
+                log.warning("DRC failsafe: %s: motion stopped", action.reason)
+            if self.failsafe is None or self.failsafe[0] != action.reason:
+                self.failsafe = (action.reason, self.clock.time_ms())
+        self._in_loop(self._publish_osd, self.session.drc_state)
 
-    # ---------------------------------------------------------------------------------- pushes (loop)
+    def _report(self, state: int, result: int) -> None:
+        self.publish_event("drc_status_notify", {"result": int(result), "drc_state": state}, True)
+        self._publish_osd(state)
+        if state == 2 and self._push_task is None:
+            self._push_task = self.loop.create_task(self._pushes(), name="drc-pushes")
+        elif state != 2 and self._push_task is not None:
+            self._push_task.cancel()
+            self._push_task = None
+        if state == 2:
+            log.info("DRC session started (%s broker)", "dedicated" if self.dedicated_link else "main")
+        elif state == 0:
+            log.info("DRC session ended (result %d)", result)
+
+    def _notify(self, state: int, result: int) -> None:
+        self.publish_event("drc_status_notify", {"result": int(result), "drc_state": state}, True)
+
+    def osd_data(self, state: int | None = None) -> dict[str, Any]:
+        """The gateway's osd body: ``drc_state`` and the failsafe that holds (``x_drc_failsafe``)."""
+        failsafe = self.failsafe
+        return {
+            "drc_state": self.session.drc_state if state is None else state,
+            "x_drc_failsafe": (
+                {"reason": failsafe[0], "since": failsafe[1]} if failsafe is not None else {"reason": "none"}
+            ),
+        }
+
+    def _publish_osd(self, state: int) -> None:
+        self.publish_gateway_osd(self.osd_data(state))
+
+    # ------------------------------------------------------------------------- pushes (the loop)
     async def _pushes(self) -> None:
         next_osd = next_hsi = next_delay = 0.0
-        while self.active:
-            now = self.loop.time()
+        while True:
+            now = self.now()
             try:
                 if now >= next_osd:
                     next_osd = now + 1.0 / self.osd_hz
@@ -448,7 +714,7 @@ class DrcController:
         if data is None:
             return
         try:
-            msg = self.registry.build(TopicKind.DRC_UP, method, data, timestamp=int(time.time() * 1000))
+            msg = self.registry.build(TopicKind.DRC_UP, method, data, timestamp=self.clock.time_ms())
         except ValidationError as exc:
             self.metrics.inc("outbound_invalid_total", kind="drc_up")
             log.debug("skipped %s: %s", method, exc.errors()[:1])

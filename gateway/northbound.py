@@ -73,7 +73,10 @@ class Northbound:
         self._events: dict[str, _PendingEvent] = {}
         self._rng = random.Random(secrets.randbits(64))
         self._next_osd: dict[str, float] = {}
-        self.drc_state: Callable[[], int] = lambda: 0  # set by the app when live control exists
+        #: the gateway's own osd body (drc_state, the live-control failsafe); set by the app
+        self.gateway_osd_data: Callable[[], dict[str, Any]] = lambda: {"drc_state": 0}
+        #: called when a device takes flight authority back (the app hands it to live control)
+        self.on_authority_lost: Callable[[str], None] | None = None
         self._next_gateway_osd = 0.0
         self._osd_period = {d.sn: (d.osd_period or settings.osd_period) for d in settings.devices}
 
@@ -165,6 +168,8 @@ class Northbound:
             adapter = self.devices.by_sn(sn)
             if adapter is not None:
                 self.publish_state(adapter)
+            if self.on_authority_lost is not None:
+                self.on_authority_lost(sn)
 
     # -- events_reply -----------------------------------------------------------------------------
     def events_reply(self, tid: str, result: int) -> None:
@@ -268,7 +273,7 @@ class Northbound:
         now = self.clock.monotonic()
         if now >= self._next_gateway_osd:
             self._next_gateway_osd = now + self.settings.osd_period
-            self.gateway_osd({"drc_state": self.drc_state()})
+            self.gateway_osd(self.gateway_osd_data())
         count = len(self.devices)
         for i, adapter in enumerate(self.devices):
             sn = adapter.info.sn

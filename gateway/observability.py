@@ -76,7 +76,11 @@ HELP: dict[str, str] = {
     "drc_sticks_total": "DRC drone_control set-points accepted",
     "drc_rejected_total": "DRC messages refused, by reason",
     "drc_failsafe_stops_total": "Motion stopped by a DRC failsafe, by reason "
-    "(sticks, heartbeat, link_lost, emergency_stop)",
+    "(sticks, heartbeat, link_lost, emergency_stop, authority)",
+    "drc_stop_failures_total": "Stop frames (zero set-point, emergency stop) a device could not be sent, "
+    "by device and reason",
+    "drc_drive_failures_total": "Live-control frames a device could not be sent, by device and reason",
+    "services_stops_obeyed_total": "Stop services obeyed although their data could not be parsed, by method",
 }
 #: Per-link counters (``djigw_link_<name>_total{device, kind}``), read from the links and decoders.
 _LINK_COUNTERS = {
@@ -284,24 +288,7 @@ class Observability:
         drc = getattr(self.app, "drc", None)
         if drc is None:
             return {"state": 0, "active": False}
-        now = drc.now()
-
-        def age(t: float) -> float | None:
-            return round(now - t, 3) if t != float("-inf") else None
-
-        forward, right, up, yaw = drc.setpoint
-        return {
-            "state": int(drc.drc_state),
-            "active": bool(drc.active),
-            "broker": "dedicated" if getattr(drc, "_bridge", None) is not None else "main",
-            "last_seq": drc.last_seq,
-            "heartbeat_age_s": age(drc.last_heartbeat) if drc.active else None,
-            "stick_age_s": age(drc.last_stick) if drc.active else None,
-            "setpoint": {"forward": forward, "right": right, "up": up, "yaw_rate": yaw},
-            "emergency_stop": bool(drc.estop),
-            "stopped_for_heartbeat": bool(drc.stopped_for_heartbeat),
-            "command_delay_ms": round(float(drc.cmd_delay_ms), 1),
-        }
+        return drc.snapshot()  # type: ignore[no-any-return]
 
     # -- views ------------------------------------------------------------------------------------
     def status(self, snap: dict[str, Any] | None = None) -> dict[str, Any]:

@@ -94,7 +94,9 @@ class Envelope(ContractModel):
 
 
 def _data_or_empty(value: Any) -> Any:
-    if isinstance(value, dict) and value.get("data") is None:
+    # null, a missing data and "" (DJI's reference cloud sends "data": "" for every method without
+    # parameters) all mean "no parameters"; a method that needs some then names the missing field
+    if isinstance(value, dict) and (value.get("data") is None or value.get("data") == ""):
         return {**value, "data": {}}
     return value
 

@@ -15,11 +15,21 @@ from __future__ import annotations
 
 import enum
 import re
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import ConfigDict, Field, model_validator
 
-from .base import Float, Int, Latitude, Longitude, OutboundModel, PayloadIndex, enum_description, int_enum
+from .base import (
+    Float,
+    Int,
+    Latitude,
+    Longitude,
+    OutboundModel,
+    PayloadIndex,
+    TimestampMs,
+    enum_description,
+    int_enum,
+)
 from .state import DrcStateField, DrcStateProperty, require_any
 
 
@@ -38,8 +48,24 @@ Speed = Annotated[float, Field(strict=True, allow_inf_nan=False, json_schema_ext
 Percent = Annotated[int, Field(strict=True, ge=0, le=100, json_schema_extra={"x-unit": "%"})]
 
 
+class DrcFailsafe(OutboundModel):
+    """Extension. The live-control failsafe that fired last and still holds (``none`` once it cleared)."""
+
+    reason: Literal["none", "sticks", "heartbeat", "emergency_stop", "link_lost", "authority"] = Field(
+        description="sticks: no drone_control for drc.stick_timeout; heartbeat: no heart_beat for "
+        "drc.heartbeat_timeout; emergency_stop; link_lost: the DRC broker connection dropped; authority: "
+        "flight/payload authority lost; none: nothing holds."
+    )
+    since: TimestampMs | None = Field(default=None, description="When it first fired (ms since the epoch).")
+
+
 class GatewayOsd(DrcStateProperty):
-    """The gateway's own osd: the ``drc_state`` property (seed 003 § Property, pushMode 0)."""
+    """The gateway's own osd: the ``drc_state`` property (seed 003 § Property, pushMode 0), and which
+    live-control failsafe holds (extension)."""
+
+    x_drc_failsafe: DrcFailsafe | None = Field(
+        default=None, description=_ext("The live-control failsafe that holds the devices, if any.")
+    )
 
 
 # ---------------------------------------------------------------------------------------------- aircraft

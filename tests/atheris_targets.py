@@ -324,7 +324,7 @@ def _drc() -> OneInput:
         from gateway.devices import DeviceTable
         from gateway.drc import ZERO, DrcController
         from gateway.metrics import Metrics
-    from tests.support import gateway_settings
+    from tests.support import gateway_settings, live_drc_session
     from tests.test_fuzz_inbound import GW, EchoAdapter
 
     class Driven(EchoAdapter):
@@ -364,13 +364,16 @@ def _drc() -> OneInput:
             publish_event=lambda *a: None,
             publish_gateway_osd=lambda d: None,
         )
-        drc.active = True
+        sid = live_drc_session(drc)
+        up = Up()
         for message in data.split(b"\n")[:16]:
             before = len(device.drives)
-            drc.handle_down(message)
-            assert all(math.isfinite(v) for v in drc.setpoint), f"set-point {drc.setpoint}"
-            if drc.estop:  # an emergency stop holds a zero set-point until sticks restart at seq 0
-                assert drc.setpoint == ZERO, f"set-point {drc.setpoint} during an emergency stop"
+            drc.handle_down(message, sid, up)
+            drc.writer.write(drc.writer.setpoint)  # what the writer thread would send now
+            setpoint = drc.session.setpoint
+            assert all(math.isfinite(v) for v in setpoint), f"set-point {setpoint}"
+            if drc.session.snapshot(drc.now())["hold"] == "emergency_stop":  # zero until seq restarts at 0
+                assert setpoint == ZERO, f"set-point {setpoint} during an emergency stop"
                 assert all(sp == ZERO for sp in device.drives[before:]), "driven during an emergency stop"
         for raw in sent:
             _no_nan(raw)

@@ -333,3 +333,18 @@ class FakeAdapter(Adapter):
 
     def osd_snapshot(self) -> Mapping[str, Any] | None:
         return self._osd
+
+
+def live_drc_session(drc: Any) -> int:
+    """Put a (not started) DrcController into a live session on its main link, as a drc_mode_enter
+    that succeeded would, without a loop: for harnesses that feed drc/down directly. Returns the
+    session id that drc/down messages must name."""
+    from gateway import drc_session as ds
+
+    now = drc.now()
+    drc.session.handle(ds.Enter(now, None, ds.LinkSpec("main", False)))
+    sid = drc.session.session_id
+    drc._links[sid] = None
+    drc.refresh_targets()
+    drc.session.handle(ds.LinkUp(now, sid))
+    return int(sid)

@@ -343,7 +343,7 @@ def test_drc_on_the_main_broker_reuses_its_connection(broker: LocalBroker, can_c
                 "expire_time": 0, "enable_tls": False}  # fmt: skip
         r = cloud.service("drc_mode_enter", {"mqtt_broker": same, "osd_frequency": 5, "hsi_frequency": 1})
         assert r["data"]["result"] == 0
-        assert gw.app.drc._bridge is None  # the main connection carries drc/down and drc/up
+        assert gw.app.drc.dedicated_link is None  # the main connection carries drc/down and drc/up
         cloud.publish(
             f"thing/product/{GW}/drc/down",
             {"method": "heart_beat", "data": {"seq": 7, "timestamp": 9}},

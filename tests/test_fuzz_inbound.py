@@ -149,7 +149,7 @@ def test_dispatcher_survives_anything(topic_name: str, payload: bytes) -> None:
 def test_drc_handler_survives_anything(payload: bytes) -> None:
     from gateway.app import build_registry
     from gateway.drc import DrcController
-    from tests.support import gateway_settings
+    from tests.support import gateway_settings, live_drc_session
 
     sent: list[bytes] = []
 
@@ -170,8 +170,8 @@ def test_drc_handler_survives_anything(payload: bytes) -> None:
             publish_event=lambda *a: None,
             publish_gateway_osd=lambda d: None,
         )
-        drc.active = True
-        drc.handle_down(payload)
+        sid = live_drc_session(drc)
+        drc.handle_down(payload, sid, Up())  # type: ignore[arg-type]
     finally:
         loop.close()
     fuzz_stats.count("drc")
