@@ -352,8 +352,9 @@ class DrcView:
     stick: dict[str, Any] = field(default_factory=dict)  # the last drone_control data
     stick_at: float | None = None
     stick_result: int | None = None
-    failsafe: str | None = None  # the last failsafe reported (heartbeat lost, emergency stop, …)
-    failsafe_at: float | None = None
+    failsafe: str | None = None  # the failsafe that holds (heartbeat lost, stick timeout, emergency stop, …)
+    failsafe_reason: str | None = None  # its kind (sticks, heartbeat, emergency_stop, link_lost, authority)
+    failsafe_at: float | None = None  # when it first fired
     delay_ms: float | None = None  # the gateway's delay_info_push sdr_cmd_delay
     push: dict[str, Any] = field(default_factory=dict)  # the last osd_info_push
 
@@ -428,6 +429,15 @@ class MonitorState:
         if sn == self.gateway_sn:
             if "drc_state" in data:
                 self.drc.state = int(data["drc_state"])
+            failsafe = data.get("x_drc_failsafe")
+            if isinstance(failsafe, dict):  # the gateway says which failsafe holds, and since when
+                reason = str(failsafe.get("reason", "none"))
+                if reason == "none":
+                    self.drc.failsafe = self.drc.failsafe_reason = None
+                else:
+                    since = failsafe.get("since")
+                    at = now - max(0.0, time.time() - since / 1000) if isinstance(since, int | float) else now
+                    self._failsafe(_FAILSAFE_TEXT.get(reason, reason), at, reason)
             return [f"{_clock()} osd    {sn} drc_state={data.get('drc_state')}"] if self.verbose else []
         view = self.devices.setdefault(sn, DeviceView(sn))
         view.osd.update(data)
@@ -447,10 +457,14 @@ class MonitorState:
         if method == "drc_status_notify":
             self.drc.state = int(data.get("drc_state", self.drc.state))
             result = int(data.get("result", 0) or 0)
-            if result:
-                self._failsafe(f"{result} {_meaning(result)}", now)
+            if result == 514301:
+                self._failsafe(f"{result} {_meaning(result)}", now, "heartbeat")
+            elif result:
+                self._failsafe(f"{result} {_meaning(result)}", now, f"result {result}")
+            elif self.drc.failsafe_reason == "heartbeat":  # heartbeats resumed: that failsafe is over
+                self.drc.failsafe = self.drc.failsafe_reason = None
         elif method == "joystick_invalid_notify":
-            self._failsafe(f"joystick invalid (reason {data.get('reason')})", now)
+            self._failsafe(f"joystick invalid (reason {data.get('reason')})", now, "authority")
         self.events.append((now, f"event {text}"))
         return [f"{_clock()} event  {text}"]
 
@@ -483,7 +497,7 @@ class MonitorState:
             drc.stick, drc.stick_at = dict(data), now
             return [f"{_clock()} drc    sticks {_compact(data)}"]
         if method == "drone_emergency_stop":
-            self._failsafe("emergency stop requested", now)
+            self._failsafe(_FAILSAFE_TEXT["emergency_stop"], now, "emergency_stop")
             return [f"{_clock()} drc    EMERGENCY STOP"]
         return []
 
@@ -514,8 +528,24 @@ class MonitorState:
             return [f"{_clock()} drc    {method} {_compact(data)}"] if self.verbose else []
         return [f"{_clock()} drc    {method} {_compact(data)}"]
 
-    def _failsafe(self, text: str, now: float) -> None:
-        self.drc.failsafe, self.drc.failsafe_at = text, now
+    def _failsafe(self, text: str, now: float, reason: str) -> None:
+        """Show ``text``; the same failsafe seen again keeps the time it first fired."""
+        drc = self.drc
+        if drc.failsafe is None or drc.failsafe_reason != reason or drc.failsafe_at is None:
+            drc.failsafe_at = now
+        else:  # still the same one (the osd repeats it, the event and the osd both tell it)
+            drc.failsafe_at = min(drc.failsafe_at, now)
+        drc.failsafe, drc.failsafe_reason = text, reason
+
+
+#: How the monitor names each failsafe the gateway reports in its osd (``x_drc_failsafe.reason``).
+_FAILSAFE_TEXT = {
+    "sticks": "stick timeout: no drone_control for drc.stick_timeout, holding zero",
+    "heartbeat": "514301 DRC link: heartbeat timed out",
+    "emergency_stop": "emergency stop: held until sticks restart at seq 0",
+    "link_lost": "514303 DRC link lost",
+    "authority": "flight/payload authority lost",
+}
 
 
 def osd_summary(data: dict[str, Any], limit: int = 8) -> str:

@@ -90,8 +90,10 @@ class MotionWriter:
     It holds the set-point (:meth:`set`) and an emergency-stop request (:meth:`emergency`), which any
     thread may change; it sends a changed set-point at once (one thread hand-off: stick-to-wire is one
     frame), and the streamed set-point every ``period``. Before each periodic send it calls ``tick``
-    (the session's timeouts), so a loss is acted on within one period. A device call that raises is
-    counted and logged by ``on_failure``, never swallowed; it cannot stop the stream to other devices.
+    (the session's timeouts), so a loss is acted on within one period. Without a session (the set-point
+    is not streamed) it sleeps until woken: a hundred idle gateways in one process cost no wake-ups. A
+    device call that raises is counted and logged by ``on_failure``, never swallowed; it cannot stop the
+    stream to other devices.
     """
 
     def __init__(
@@ -162,6 +164,10 @@ class MotionWriter:
         while True:
             with self._cond:
                 while not (self._dirty or self._estop or self._stopping):
+                    if not self._stream:  # no session: nothing to stream or time out; sleep until woken
+                        self._cond.wait()
+                        next_tick = self._now() + self.period
+                        continue
                     left = next_tick - self._now()
                     if left <= 0:
                         break
@@ -653,7 +659,9 @@ class DrcController:
         else:
             if action.fired:
                 self.metrics.inc("drc_failsafe_stops_total", reason=action.reason)
-                log.warning("DRC failsafe: %s: motion stopped", action.reason)
+                # sticks stopping is how an operator lets go: routine; every other failsafe is news
+                level = logging.INFO if action.reason == "sticks" else logging.WARNING
+                log.log(level, "DRC failsafe: %s: motion stopped", action.reason)
             if self.failsafe is None or self.failsafe[0] != action.reason:
                 self.failsafe = (action.reason, self.clock.time_ms())
         self._in_loop(self._publish_osd, self.session.drc_state)

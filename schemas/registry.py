@@ -71,7 +71,7 @@ from .services import (
     PayloadAuthorityGrab,
     TakeoffToPoint,
 )
-from .state import AuthorityState, RobotState
+from .state import AircraftState, AuthorityState, RobotState
 from .status import UpdateTopo
 from .topics import TOPICS, Direction, TopicKind, reply_kind
 
@@ -192,7 +192,7 @@ TELEMETRY: dict[tuple[TopicKind, Profile], type[ContractModel]] = {
     (TopicKind.OSD, Profile.AIRCRAFT): AircraftOsd,
     (TopicKind.OSD, Profile.GIMBAL): GimbalOsd,
     (TopicKind.OSD, Profile.ROBOT): RobotOsd,
-    (TopicKind.STATE, Profile.AIRCRAFT): AuthorityState,
+    (TopicKind.STATE, Profile.AIRCRAFT): AircraftState,
     (TopicKind.STATE, Profile.GIMBAL): AuthorityState,
     (TopicKind.STATE, Profile.ROBOT): RobotState,
 }

@@ -13,7 +13,7 @@ import enum
 
 from pydantic import Field, model_validator
 
-from .base import Bool, Int, OutboundModel, PayloadIndex, SerialNumber, enum_description, int_enum
+from .base import Bool, Int, OutboundModel, PayloadIndex, SerialNumber, Text, enum_description, int_enum
 
 
 class DrcState(enum.IntEnum):
@@ -73,6 +73,18 @@ class AuthorityState(OutboundModel):
     def _not_empty(self) -> AuthorityState:
         require_any(self)
         return self
+
+
+class AircraftState(AuthorityState):
+    """The aircraft's state: its authority, and what its flight controller says it is (the version reply)."""
+
+    firmware_version: Text | None = Field(
+        default=None, description="Flight controller firmware, e.g. 03.03.100.00 (Cloud API property name)."
+    )
+    x_hardware: Text | None = Field(
+        default=None,
+        description="Extension. Flight controller hardware (from its version name): A3, N3, M100, ...",
+    )
 
 
 class DrcStateProperty(OutboundModel):

@@ -9,6 +9,7 @@ import re
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -78,6 +79,9 @@ def test_the_monitor_state_follows_topology_osd_events_and_the_drc_session() -> 
     notify = {"method": "drc_status_notify", "need_reply": 1, "data": {"result": 514301, "drc_state": 2}}
     _feed(st, f"thing/product/{GW}/events", notify, 2.3)
     assert st.drc.failsafe is not None and st.drc.failsafe.startswith("514301")
+    first = st.drc.failsafe_at
+    _feed(st, f"thing/product/{GW}/events", notify, 2.6)  # the same failsafe again: first time kept
+    assert st.drc.failsafe_at == first == 2.3
     # and the device going away
     _feed(st, f"sys/product/{GW}/status", {"method": "update_topo", "data": {"sub_devices": []}}, 3.0)
     assert not st.devices[SN].online
@@ -338,3 +342,28 @@ def test_monitor_once_draws_the_rich_view(rig: dict[str, Any]) -> None:
 def test_monitor_without_a_broker_fails_cleanly(capsys: pytest.CaptureFixture[str]) -> None:
     code = main(["monitor", "--gateway-sn", GW, "--broker", f"mqtt://127.0.0.1:{free_port()}", "--plain"])
     assert code == 2 and "cannot reach the broker" in capsys.readouterr().err
+
+
+def test_the_monitor_shows_the_failsafe_that_fired_and_clears_a_heartbeat_one() -> None:
+    st = MonitorState(GW)
+    osd = f"thing/product/{GW}/osd"
+    since = int((time.time() - 2.0) * 1000)  # fired 2 s before the monitor saw it
+    fired = {"data": {"drc_state": 2, "x_drc_failsafe": {"reason": "sticks", "since": since}}}
+    _feed(st, osd, fired, 100.0)
+    assert st.drc.failsafe is not None and st.drc.failsafe.startswith("stick timeout")
+    assert st.drc.failsafe_at == pytest.approx(98.0, abs=0.5)  # its first occurrence, not the report's
+    _feed(st, osd, fired, 101.0)
+    assert st.drc.failsafe_at == pytest.approx(98.0, abs=0.5)
+    _feed(st, osd, {"data": {"drc_state": 2, "x_drc_failsafe": {"reason": "none"}}}, 102.0)
+    assert st.drc.failsafe is None
+    # heartbeats lost (the event), then resumed (result 0): the monitor clears it
+    events = f"thing/product/{GW}/events"
+    lost = {"method": "drc_status_notify", "data": {"result": 514301, "drc_state": 2}}
+    _feed(st, events, lost, 103.0)
+    assert st.drc.failsafe is not None and st.drc.failsafe.startswith("514301")
+    _feed(st, events, {"method": "drc_status_notify", "data": {"result": 0, "drc_state": 2}}, 104.0)
+    assert st.drc.failsafe is None
+    console = Console(record=True, width=140, color_system=None)
+    _feed(st, osd, fired, 105.0)
+    console.print(render(st, 106.0, "mqtt://127.0.0.1:1883"))
+    assert "stick timeout" in console.export_text()

@@ -26,7 +26,9 @@ from adapters.osdk.commands import (
     decode_request,
     encode_ack_payload,
     encode_request,
+    encode_version_reply,
     examples_of,
+    parse_version_reply,
     spec_for,
 )
 from adapters.osdk.protocol import SessionMode, decode_frame, encode_ack, encode_command
@@ -107,7 +109,7 @@ def test_table_keys_and_session_rules() -> None:
         ("fm_update_target", [20], []),
         ("status_push", [6], []),
         ("activate", [44], [2]),
-        ("get_version", [1], [38, None]),
+        ("get_version", [1], [None]),
         ("set_broadcast_frequency", [16], [2]),
         ("obtain_control", [1], [2]),
         ("flight_task", [1], [2]),
@@ -335,12 +337,55 @@ def test_activation_defaults() -> None:
     assert decode_request(0x00, 0x01, payload).fields["bundle_id"] == b"0" * 32
 
 
-def test_version_reply_both_shapes() -> None:
-    data = struct.pack("<HI", 0, 0xDEADBEEF) + b"SDK-v1.0 BETA M100-03.01.10.00".ljust(32, b"\0")
-    fields = decode_ack("get_version", data).fields
-    assert fields["version_crc"] == 0xDEADBEEF and fields["version_name"].startswith(b"SDK-v1.0")
-    other = decode_ack("get_version", b"\x01\xff" + b"M600" + bytes(12) + b"\x01\x02\x03\x04").fields
-    assert other == {"ack": 0xFF01, "version_data": b"M600" + bytes(12) + b"\x01\x02\x03\x04"}
+# The A3 reply as DJI's Onboard-SDK 3.x library reads it (Vehicle::parseDroneVersionInfo): u16 ack, the
+# ID string and its NUL (at most 16 bytes), the 32-byte name. Bytes written out by hand, not by our encoder.
+A3_REPLY = (
+    b"\x00\x00"  # ack 0: activated
+    + b"0MFDE4B00200YQ\x00"  # ID string, NUL-terminated (15 bytes)
+    + b"SDK-v1.1 BETA A3-03.03.100.00\x00\x00\x00"  # 32-byte version name, NUL padded
+)
+# M100 firmware 2.3: u16 ack, u32 version CRC, 32-byte name (PROTOCOL-NOTES).
+M100_23_REPLY = b"\x01\xff" + b"\xef\xbe\xad\xde" + b"SDK-v1.0 BETA M100-02.03.00.00".ljust(32, b"\0")
+# Firmware 3.1 (the library's "older than 3.2" branch): u32 CRC, then the ID and its NUL, then the name.
+FW31_REPLY = (
+    b"\x00\x00" + b"\x04\x03\x02\x01" + b"M100SN\x00" + b"SDK-v1.1 BETA M100-03.01.10.00".ljust(32, b"\0")
+)
+
+
+def test_version_reply_in_each_firmware_layout() -> None:
+    a3 = parse_version_reply(*_ack_and_body(A3_REPLY))
+    assert (a3.ack, a3.layout, a3.serial, a3.version_crc) == (0, "id", "0MFDE4B00200YQ", None)
+    assert (a3.name, a3.hardware, a3.firmware) == ("SDK-v1.1 BETA A3-03.03.100.00", "A3", "03.03.100.00")
+    m100 = parse_version_reply(*_ack_and_body(M100_23_REPLY))
+    assert (m100.ack, m100.layout, m100.version_crc, m100.hardware) == (0xFF01, "crc", 0xDEADBEEF, "M100")
+    old = parse_version_reply(*_ack_and_body(FW31_REPLY))
+    assert (old.layout, old.version_crc, old.serial, old.firmware) == (
+        "crc_id",
+        0x01020304,
+        "M100SN",
+        "03.01.10.00",
+    )
+    for raw, layout, kw in (
+        (A3_REPLY, "id", {"serial": "0MFDE4B00200YQ"}),
+        (M100_23_REPLY, "crc", {"version_crc": 0xDEADBEEF}),
+        (FW31_REPLY, "crc_id", {"serial": "M100SN", "version_crc": 0x01020304}),
+    ):
+        ack, body = _ack_and_body(raw)
+        name = parse_version_reply(ack, body).name
+        assert encode_version_reply(ack, name, layout=layout, **kw) == raw  # byte-exact both ways
+    # through the command table: the body stays raw for the parser
+    assert decode_ack("get_version", A3_REPLY).fields == {"ack": 0, "version_data": A3_REPLY[2:]}
+
+
+def test_a_version_reply_that_fits_no_layout_is_an_error() -> None:
+    with pytest.raises(ValueError, match="ID"):
+        parse_version_reply(0, b"X" * 40)  # no NUL, no name
+    with pytest.raises(ValueError, match="neither"):
+        parse_version_reply(0, b"\x01\x02" + b"SDK-v1.1 BETA A3-03.03.100.00".ljust(32, b"\0"))
+
+
+def _ack_and_body(raw: bytes) -> tuple[int, bytes]:
+    return int.from_bytes(raw[:2], "little"), raw[2:]
 
 
 def test_movement_flag_helpers() -> None:

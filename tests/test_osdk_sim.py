@@ -34,7 +34,15 @@ from adapters.osdk.commands import (
     control_flag,
 )
 from adapters.osdk.protocol import Decoder, Frame, encode_ack, encode_command, encode_frame
-from adapters.osdk.sim import NO_RIGHTS_ACK, NOT_ACTIVATED_ACK, OsdkFcDevice, OsdkFcModel, main
+from adapters.osdk.sim import (
+    NO_RIGHTS_ACK,
+    NOT_ACTIVATED_ACK,
+    SUBSCRIBE_REFUSED_ACK,
+    UNKNOWN_COMMAND_ACK,
+    OsdkFcDevice,
+    OsdkFcModel,
+    main,
+)
 from adapters.osdk.telemetry import FlightData, decode_flight_data
 from adapters.simio import PtyEndpoint, TcpEndpoint
 
@@ -202,7 +210,11 @@ def _mission(host: FakeHost | SerialHost, model: OsdkFcModel, points: list[tuple
 def test_activation_gates_every_other_command_set() -> None:
     host = FakeHost()
     version = host.request("get_version", {"arbitrary": 0})
-    assert version["ack"] == NOT_ACTIVATED_ACK and version["version_name"].startswith(b"SDK-")
+    assert version["ack"] == NOT_ACTIVATED_ACK
+    # the A3 layout DJI's own library reads: ID string + NUL, then the 32-byte name
+    info = cmds.parse_version_reply(version["ack"], version["version_data"])
+    assert (info.layout, info.hardware, info.firmware) == ("id", "A3", "03.03.100.00")
+    assert version["version_data"] == b"SIMFC0000000001\x00" + b"SDK-v1.1 BETA A3-03.03.100.00\x00\x00\x00"
     # before activation: the common "no authorization" ACK, and nothing happens
     raw, seq = host.frame("obtain_control", {"control": 1})
     host.write(raw)
@@ -610,10 +622,23 @@ def test_bad_payloads_get_the_commands_invalid_code() -> None:
     assert host.ack_for(2, 7).data == b"\xf4"
     host.write(encode_command(0x00, 0x01, b"\x00", 2, 8))  # activation is 44 bytes
     assert host.ack_for(2, 8).data == (1).to_bytes(2, "little")
-    host.write(encode_command(0x07, 0x07, b"\x00", 2, 9))  # no such command: no answer
-    host.run(0.5)
-    assert (2, 9) not in host.acks and host.model.unknown_commands == 1
     assert host.model.bad_payloads == 2 and host.model.errors == 0
+
+
+def test_unknown_commands_and_subscription_are_answered_not_ignored() -> None:
+    """A real FC answers what asks for an answer: DJI's Onboard-SDK library subscribes (0x0B) on A3
+    firmware 3.3+, and a silent FC left it waiting on its ACK until the time-out."""
+    host = FakeHost()
+    host.request("activate", {"app_id": APP_ID})
+    host.write(encode_command(0x07, 0x07, b"\x00", 2, 9))  # no such command
+    assert host.ack_for(2, 9, timeout=0.1).data == UNKNOWN_COMMAND_ACK.to_bytes(2, "little")
+    for seq, cmd_id in ((10, 0x00), (11, 0x01), (12, 0x03)):  # verify, add package, remove package
+        host.write(encode_command(0x0B, cmd_id, b"\x00" * 4, 2, seq))
+        assert host.ack_for(2, seq, timeout=0.1).data == bytes([SUBSCRIBE_REFUSED_ACK])
+    assert host.model.subscriptions_refused == 3 and host.model.unknown_commands == 4
+    host.write(encode_command(0x07, 0x08, b"\x00", 0, 13))  # session 0 asks for nothing: nothing comes
+    host.run(0.2)
+    assert (0, 13) not in host.acks
 
 
 # ----------------------------------------------------------------------------------------------------

@@ -144,7 +144,9 @@ class AircraftAdapter(SupervisedAdapter):
         self._dups = DuplicateFilter()
         self.activated = False
         self._next_activation = 0.0  # when an unactivated FC is next asked (version, activation, rates)
-        self.version: str | None = None
+        self.version: str | None = None  # the version name, e.g. "SDK-v1.1 BETA A3-03.03.100.00"
+        self.hardware: str | None = None  # e.g. "A3", from the version name
+        self.firmware_version: str | None = None  # e.g. "03.03.100.00", from the version name
         self.activation_error: str | None = None
         self.telemetry = Telemetry()
         self.has_control = False
@@ -255,9 +257,15 @@ class AircraftAdapter(SupervisedAdapter):
         s = self.settings
         try:
             ver = await self.command("get_version", {"arbitrary": 0})
-            name = ver.fields.get("version_name")
-            if isinstance(name, bytes):
-                self.version = name.rstrip(b"\0").decode(errors="replace")
+            try:
+                info = cmds.parse_version_reply(int(ver.fields["ack"]), bytes(ver.fields["version_data"]))
+            except ValueError as exc:
+                log.warning("aircraft %s: unreadable version reply: %s", self.info.sn, exc)
+            else:
+                changed = (info.hardware, info.firmware) != (self.hardware, self.firmware_version)
+                self.version, self.hardware, self.firmware_version = info.name, info.hardware, info.firmware
+                if changed and self._sink is not None and self.online:
+                    self._sink.state(self.info.sn, self.state_snapshot() or {})
             ack = await self.command(
                 "activate",
                 {"app_id": s.app_id, "api_level": s.api_level, "fw_version": s.activation_version},
@@ -496,7 +504,12 @@ class AircraftAdapter(SupervisedAdapter):
         return body
 
     def state_snapshot(self) -> Mapping[str, Any] | None:
-        return {"locked": False}
+        state: dict[str, Any] = {"locked": False}
+        if self.firmware_version is not None:
+            state["firmware_version"] = self.firmware_version
+        if self.hardware is not None:
+            state["x_hardware"] = self.hardware
+        return state
 
     # -- Cloud API methods ------------------------------------------------------------------------
     def _require_online(self) -> None:

@@ -530,16 +530,98 @@ ACTIVATE = Layout(
         _f("bundle_id", "s", "", "32 x ASCII '0'", count=32),
     )
 )
+# The 0x00 0x00 reply: u16 ack, then a body whose layout depends on the firmware (PROTOCOL-NOTES
+# "Activation and version", corrected against DJI's Onboard-SDK 3.x parser, Vehicle::parseDroneVersionInfo):
+#   A3/N3/M600/M210 (firmware >= 3.2): ID string, NUL-terminated, <= 16 bytes with the NUL; 32-byte name
+#   firmware 3.1 (M100 3.1, old A3):   u32 version CRC, then the ID string and its NUL; 32-byte name
+#   M100 2.3:                          u32 version CRC; 32-byte name
+# The name reads "SDK-v1.1 BETA A3-03.03.100.00": the hardware after the second space up to '-', the
+# firmware version after it. The body is kept raw here and read by parse_version_reply / made by
+# encode_version_reply, because its ID field has no fixed length.
 VERSION_REPLY = Layout(
-    (
-        _f("ack", "H", "", "0 activated, 0xFF01 not activated"),
-        _f("version_crc", "I"),
-        _f("version_name", "s", "", "ASCII, NUL padded", count=32),
-    )
+    (_f("ack", "H", "", "0 activated, 0xFF01 not activated"),),
+    tail=Tail("version_data", "firmware-specific: [u32 CRC] [ID NUL] 32-byte version name"),
 )
-# Other firmware answers 0x00 0x00 with other bodies (OSDK parses hardware/firmware versions out of
-# them); anything that is not the 38-byte M100 form keeps its body as raw bytes.
-VERSION_REPLY_RAW = Layout((_f("ack", "H"),), tail=Tail("version_data", "firmware-specific version body"))
+VERSION_NAME_BYTES = 32
+VERSION_ID_MAX = 16  # with its NUL
+
+
+@dataclass(frozen=True, slots=True)
+class DroneVersion:
+    """A decoded 0x00 0x00 reply. ``layout``: ``id`` (firmware >= 3.2), ``crc_id`` (3.1) or ``crc``
+    (M100 2.3); ``hardware``/``firmware`` are read from ``name`` (None when it does not follow the form)."""
+
+    ack: int
+    layout: str
+    name: str
+    serial: str | None = None
+    version_crc: int | None = None
+    hardware: str | None = None
+    firmware: str | None = None
+
+
+def _name_parts(name: str) -> tuple[str | None, str | None]:
+    parts = name.split(" ")
+    if len(parts) < 3 or "-" not in parts[2]:
+        return None, None
+    hardware, _, firmware = parts[2].partition("-")
+    return (hardware or None), (firmware or None)
+
+
+def parse_version_reply(ack: int, body: bytes) -> DroneVersion:
+    """Read the body of a 0x00 0x00 reply in any of the three layouts. Raises ``ValueError`` when it is
+    none of them (too short, no NUL where the ID must end)."""
+    name_at = body.find(b"SDK-")
+    if name_at < 0 or len(body) < name_at + 4:
+        # no recognisable name: the library's rule (ID up to NUL, then the name) decides the split
+        nul = body.find(b"\0", 0, VERSION_ID_MAX)
+        if nul < 0 or len(body) < nul + 1 + 1:
+            raise ValueError(f"version reply of {len(body)} bytes has no ID string and no version name")
+        name_at = nul + 1
+    prefix, raw_name = body[:name_at], body[name_at : name_at + VERSION_NAME_BYTES]
+    name = raw_name.split(b"\0", 1)[0].decode("ascii", errors="replace")
+    hardware, firmware = _name_parts(name)
+    if prefix.endswith(b"\0"):
+        ident = prefix[:-1]
+        if firmware is not None and _fw_tuple(firmware) < (3, 2) and len(ident) >= 4:
+            crc = int.from_bytes(ident[:4], "little")
+            serial = ident[4:].decode("ascii", errors="replace")
+            return DroneVersion(ack, "crc_id", name, serial or None, crc, hardware, firmware)
+        if len(prefix) > VERSION_ID_MAX:
+            raise ValueError(f"version reply ID string of {len(prefix)} bytes (at most {VERSION_ID_MAX})")
+        serial = ident.decode("ascii", errors="replace")
+        return DroneVersion(ack, "id", name, serial or None, None, hardware, firmware)
+    if len(prefix) == 4:
+        return DroneVersion(ack, "crc", name, None, int.from_bytes(prefix, "little"), hardware, firmware)
+    raise ValueError(f"version reply: {len(prefix)} bytes before the name are neither a CRC nor an ID")
+
+
+def _fw_tuple(firmware: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(p) for p in firmware.split("."))
+    except ValueError:
+        return (99,)
+
+
+def encode_version_reply(
+    ack: int, name: str, *, layout: str = "id", serial: str = "", version_crc: int = 0
+) -> bytes:
+    """The bytes of a 0x00 0x00 reply (ack included) in ``layout`` (see :class:`DroneVersion`)."""
+    raw_name = name.encode("ascii")[:VERSION_NAME_BYTES].ljust(VERSION_NAME_BYTES, b"\0")
+    head = ack.to_bytes(2, "little")
+    ident = serial.encode("ascii")
+    if layout == "id":
+        if len(ident) + 1 > VERSION_ID_MAX:
+            raise ValueError(f"ID {serial!r} longer than {VERSION_ID_MAX - 1} characters")
+        return head + ident + b"\0" + raw_name
+    crc = (version_crc & 0xFFFFFFFF).to_bytes(4, "little")
+    if layout == "crc_id":
+        return head + crc + ident + b"\0" + raw_name
+    if layout == "crc":
+        return head + crc + raw_name
+    raise ValueError(f"unknown version reply layout {layout!r}")
+
+
 BROADCAST_FREQUENCY = Layout((_f("frequency", "B", "", "rate code per item: FREQUENCIES", count=16),))
 
 # Control set 0x01 (PROTOCOL-NOTES "control (0x01)").
@@ -645,7 +727,7 @@ _NOTES_CTL = "PROTOCOL-NOTES control (0x01) and telemetry"
 _SPECS: tuple[CommandSpec, ...] = (
     # ---- activation set 0x00
     CommandSpec(
-        "get_version", 0x00, 0x00, (ARBITRARY,), (VERSION_REPLY, VERSION_REPLY_RAW), VERSION_ACK,
+        "get_version", 0x00, 0x00, (ARBITRARY,), (VERSION_REPLY,), VERSION_ACK,
         timeout=1.0, retries=3, section=_NOTES_ACT, doc="protocol version and activation state",
     ),
     CommandSpec(

@@ -103,6 +103,16 @@ EARTH_RADIUS_M = 6378137.0  # flat-earth approximation around home (module docst
 DEFAULT_HOME = (22.5431, 113.9580)  # degrees
 NOT_ACTIVATED_ACK = 0xFF01  # OSDK ErrorCode::CommonACK::NO_AUTHORIZATION_ERROR
 NO_RIGHTS_ACK = 0xFF02  # OSDK ErrorCode::CommonACK::NO_RIGHTS_ERROR (flight task without authority)
+#: A command the simulated FC does not implement, asking for an answer: u16 OSDK
+#: ``ErrorCode::CommonACK::KEY_ERROR`` (0xFF00). Which code real firmware uses is not confirmed; what
+#: matters to a client is that the answer comes at once instead of a time-out.
+UNKNOWN_COMMAND_ACK = 0xFF00
+#: The data subscription set (0x0B: 0x00 verify, 0x01 add package, 0x02 reset, 0x03 remove, 0x05 pause...).
+SUBSCRIBE_SET = 0x0B
+#: Subscription is not simulated: every 0x0B command is refused with u8 OSDK
+#: ``ErrorCode::SubscribeACK::PERMISSION_DENY`` (0x23), so a client falls back to the 0x02 0x00 broadcast
+#: (what the gateway uses) at once instead of waiting on a time-out.
+SUBSCRIBE_REFUSED_ACK = 0x23
 
 TAKEOFF_HEIGHT_M = 1.2
 VERTICAL_SPEED = 1.0  # take-off climb and landing descent, m/s
@@ -254,6 +264,8 @@ class OsdkFcModel:
         reach_pre_action_events: bool = False,
         lost_authority_mode: SessionMode = SessionMode.ACK_REQUIRED,
         version_name: str = "SDK-v1.1 BETA A3-03.03.100.00",
+        version_layout: str = "id",
+        serial: str = "SIMFC0000000001",
     ) -> None:
         if unactivated not in ("ack", "ignore"):
             raise ValueError("unactivated must be 'ack' or 'ignore'")
@@ -274,6 +286,9 @@ class OsdkFcModel:
         self.reach_pre_action_events = reach_pre_action_events
         self.lost_authority_mode = lost_authority_mode
         self.version_name = version_name
+        self.subscriptions_refused = 0  # 0x0B commands answered SUBSCRIBE_REFUSED_ACK
+        self.version_layout = version_layout  # how 0x00 0x00 is answered: cmds.encode_version_reply
+        self.serial = serial  # the flight controller's ID string in the version reply (<= 15 characters)
         self.battery_capacity_mah = 4500
         # link
         self._decoder = Decoder()
@@ -473,7 +488,15 @@ class OsdkFcModel:
         assert cmd_set is not None and cmd_id is not None  # the decoder drops shorter command frames
         specs = [s for s in cmds.specs_at(cmd_set, cmd_id) if s.direction == TO_FC]
         if not specs:
-            self.unknown_commands += 1  # not a command a flight controller takes: no answer
+            # A real flight controller answers every command that asks for an answer; silence would
+            # leave a client such as DJI's Onboard-SDK library waiting on its ACK until it times out.
+            self.unknown_commands += 1
+            if frame.session:
+                if cmd_set == SUBSCRIBE_SET:
+                    self.subscriptions_refused += 1
+                    self._ack(frame, bytes([SUBSCRIBE_REFUSED_ACK]), now)
+                else:
+                    self._ack(frame, UNKNOWN_COMMAND_ACK.to_bytes(2, "little"), now)
             return
         if not self.activated and cmd_set != 0x00:
             # Real FCs refuse with the common ACK "no authorization" (module docstring).
@@ -500,12 +523,14 @@ class OsdkFcModel:
 
     # -- 0x00 activation set ------------------------------------------------------------------------
     def _on_get_version(self, f: dict[str, Any], now: float) -> dict[str, Any]:
-        name = self.version_name.encode()[:32]
-        return {
-            "ack": 0 if self.activated else NOT_ACTIVATED_ACK,
-            "version_crc": zlib.crc32(name),
-            "version_name": name,
-        }
+        """The firmware's own layout (``version_layout``): ``id`` for A3/N3/M600/M210 firmware, as DJI's
+        Onboard-SDK 3.x library reads it; ``crc`` for M100 2.3; ``crc_id`` for firmware 3.1."""
+        ack = 0 if self.activated else NOT_ACTIVATED_ACK
+        crc = zlib.crc32(self.version_name.encode()[:32])
+        raw = cmds.encode_version_reply(
+            ack, self.version_name, layout=self.version_layout, serial=self.serial, version_crc=crc
+        )
+        return {"ack": ack, "version_data": raw[2:]}
 
     def _on_activate(self, f: dict[str, Any], now: float) -> dict[str, Any]:
         if self.reject_activation:
