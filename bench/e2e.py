@@ -120,7 +120,8 @@ def run(cfg: Config) -> list[Row]:
         through: dict[str, list[float]] = {}
         for method, data in (
             ("x_rsdk_version_get", {"payload_index": "1001-0-0"}),  # a real R SDK command and reply
-            ("camera_mode_switch", {"payload_index": "1001-0-0", "camera_mode": 0}),  # gateway only
+            # answered by the gateway itself: an R SDK gimbal takes no frame for payload authority
+            ("payload_authority_grab", {"payload_index": "1001-0-0"}),
         ):
             samples = through[method] = []
             for i in range(n + 50):
@@ -140,7 +141,7 @@ def run(cfg: Config) -> list[Row]:
     notes = {
         "x_rsdk_version_get": "cloud → mosquitto → gateway → CAN (python-can virtual) → simulated gimbal → "
         "gateway → mosquitto → cloud; includes the simulated CAN round trip (3 thread hand-offs)",
-        "camera_mode_switch": "validated, routed and answered by the gateway without a device frame: "
+        "payload_authority_grab": "validated, routed and answered by the gateway without a device frame: "
         "the gateway's own cost",
     }
     for method, samples in through.items():

@@ -763,25 +763,49 @@ class DrcController:
         }
 
     def _hsi_info(self) -> dict[str, Any]:
-        """Obstacle distances from the flight controller when it reports them; otherwise sensing is
-        reported off (distances 0, ``*_enable``/``*_work`` false), never invented."""
+        """Obstacle distances from the flight controller when it reports them (resampled onto the seed's
+        360 one-degree bins: :func:`around_distances`); otherwise sensing is reported off (distances 0,
+        ``*_enable``/``*_work`` false), never invented."""
         aircraft = self._aircraft()
         obstacles = getattr(aircraft.telemetry, "obstacles", None) if aircraft is not None else None
         if not obstacles:
             return {"up_distance": 0, "down_distance": 0, "around_distances": [], "up_enable": False,
                     "up_work": False, "down_enable": False, "down_work": False}  # fmt: skip
-
-        def mm(side: str) -> int:
-            return max(0, round(obstacles[side][0] * 1000))
-
-        return {
-            "up_distance": mm("up"),
-            "down_distance": mm("down"),
-            "around_distances": [mm(s) for s in ("front", "right", "back", "left")],
+        body: dict[str, Any] = {
+            "up_distance": _mm(obstacles["up"]),
+            "down_distance": _mm(obstacles["down"]),
+            "around_distances": around_distances(obstacles),
             "up_enable": True,
             "up_work": obstacles["up"][1],
             "down_enable": True,
             "down_work": obstacles["down"][1],
             "horizontal_enable": True,
-            "horizontal_work": all(obstacles[s][1] for s in ("front", "right", "back", "left")),
+            "horizontal_work": any(obstacles[s][1] for s in _SECTORS),
         }
+        for side in _SECTORS:
+            body[f"{side}_enable"] = True
+            body[f"{side}_work"] = obstacles[side][1]
+        return body
+
+
+#: The flight controller's horizontal sensors, clockwise from the nose (0x02 0x00 position item).
+_SECTORS = ("front", "right", "back", "left")
+
+
+def _mm(reading: tuple[float, bool]) -> int:
+    """A distance in metres (the flight controller's unit) as the Cloud API's integer millimetres; 0 when
+    the sensor does not work (its ``*_work`` flag says so)."""
+    distance, working = reading
+    return max(0, round(distance * 1000)) if working and distance == distance else 0
+
+
+def around_distances(obstacles: dict[str, tuple[float, bool]]) -> list[int]:
+    """The seed's ``around_distances``: 360 one-degree bins clockwise from the nose, in mm.
+
+    The flight controller measures four sectors (front, right, back, left), each centred on its axis
+    (0°, 90°, 180°, 270°). Each bin takes the reading of the sector it lies in: bins 315°..44° the
+    front, 45°..134° the right, 135°..224° the back, 225°..314° the left (nearest-sector resampling;
+    the FC gives one distance per sector, so nothing finer can be said). A sector whose sensor does not
+    work gives 0 in its bins, and its ``*_work`` flag is false."""
+    values = [_mm(obstacles[side]) for side in _SECTORS]
+    return [values[((degree + 45) // 90) % 4] for degree in range(360)]

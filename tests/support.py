@@ -260,6 +260,7 @@ class BusSniffer:
         self.rx = Reassembler(rx_id=HOST_TX_ID)
         self.commands: list[tuple[str, dict[str, Any]]] = []
         self.times: list[float] = []  # time.monotonic() when each command was heard
+        self.cmd_types: list[int] = []  # each command's CmdType reply type (0: no reply wanted)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -273,7 +274,17 @@ class BusSniffer:
                 if isinstance(item, Frame) and not item.is_reply:
                     m = decode_message(item)
                     self.times.append(time.monotonic())
+                    self.cmd_types.append(item.cmd_type)
                     self.commands.append((m.name, m.fields))
+
+    def cmd_type_of(self, name: str) -> int:
+        """The CmdType of the latest ``name`` command heard."""
+        for (n, _), cmd_type in zip(
+            reversed(list(self.commands)), reversed(list(self.cmd_types)), strict=False
+        ):
+            if n == name:
+                return cmd_type
+        raise AssertionError(f"no {name} heard")
 
     def names(self) -> Counter[str]:
         return Counter(name for name, _ in list(self.commands))

@@ -183,3 +183,24 @@ def test_a_stalled_device_link_does_not_stall_the_gateway(rig: dict[str, Any]) -
         pty.paused = False
     # once the link moves again, the zero set-point (sticks stopped meanwhile) reaches the aircraft
     wait_until(lambda: _setpoint(fc) == (0.0, 0.0), 5, what="zero after the stall")
+
+
+def test_hsi_info_push_has_360_one_degree_bins_from_the_flight_controller(rig: dict[str, Any]) -> None:
+    fc, cloud = rig["fc"], rig["drc"]
+    _down(cloud, "heart_beat", {"seq": 1, "timestamp": 1})
+    # an A3 has no obstacle sensors: 360 bins, every sensor reported not working
+    plain = cloud.wait_for("drc/up", lambda b: b["method"] == "hsi_info_push", timeout=5)[-1]["data"]
+    assert len(plain["around_distances"]) == 360 and set(plain["around_distances"]) == {0}
+    assert plain["front_work"] is False and plain["horizontal_work"] is False
+    # an M210-like FC: front, up and down sensors, nothing within 30 m ahead
+    fc.inspect(lambda m: setattr(m, "obstacle_sensors", {"front", "up", "down"}))
+    data = cloud.wait_for(
+        "drc/up", lambda b: b["method"] == "hsi_info_push" and b["data"].get("front_work"), timeout=5
+    )[-1]["data"]
+    bins = data["around_distances"]
+    assert len(bins) == 360 and all(isinstance(v, int) for v in bins)
+    assert bins[0] == bins[44] == bins[315] == 30000  # the front sector, in mm
+    assert bins[45] == bins[180] == bins[314] == 0  # right, back, left: no sensor there
+    assert data["up_distance"] == 30000 and data["down_work"] is True
+    height = fc.inspect(lambda m: m.u)
+    assert abs(data["down_distance"] - height * 1000) < 2000  # the height above ground, in mm

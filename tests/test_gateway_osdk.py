@@ -56,7 +56,9 @@ def _events(cloud: CloudClient, method: str) -> list[dict[str, Any]]:
     return [b["data"] for b in cloud.find("/events", lambda b: b.get("method") == method)]
 
 
-def _take_off(cloud: CloudClient, north: float = 30.0, height: float = 20.0) -> tuple[float, float]:
+def _take_off(
+    cloud: CloudClient, north: float = 30.0, height: float = 20.0, **extra: Any
+) -> tuple[float, float]:
     target = _north_east(*HOME, north, 0.0)
     data = {
         "target_latitude": target[0],
@@ -66,6 +68,7 @@ def _take_off(cloud: CloudClient, north: float = 30.0, height: float = 20.0) -> 
         "rth_altitude": 30,
         "flight_id": "flight-1",
         "max_speed": 12,
+        **extra,
     }
     assert cloud.service("takeoff_to_point", data)["data"]["result"] == 0
     return target
@@ -89,7 +92,7 @@ def test_takeoff_fly_to_and_stop(rig: dict[str, Any]) -> None:
     assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
     cloud.wait_for(f"{SN}/state", lambda b: b["data"].get("control_source") == "A")
 
-    target = _take_off(cloud)
+    target = _take_off(cloud, exit_wayline_when_rc_lost=1)
     takeoff = lambda: _events(cloud, "takeoff_to_point_progress")  # noqa: E731
     wait_until(
         lambda: any(e["status"] == "task_finish" for e in takeoff()), 40, what="take-off task finished"
@@ -98,6 +101,8 @@ def test_takeoff_fly_to_and_stop(rig: dict[str, Any]) -> None:
     expected = [("task_ready", 0), ("wayline_progress", 0), ("wayline_progress", 1), ("wayline_ok", 1)]
     assert progress == [*expected, ("task_finish", 1)], progress
     assert all(e["flight_id"] == "flight-1" and e["result"] == 0 for e in takeoff())
+    # exit_wayline_when_rc_lost 1 reached the mission init: action_on_rc_lost 0 (exit, the FC's failsafe)
+    assert fc.inspect(lambda m: m.upload.info["action_on_rc_lost"]) == 0
     osd = cloud.wait_for(
         f"{SN}/osd", lambda b: _distance(b["data"]["latitude"], b["data"]["longitude"], *target) < 2.0
     )

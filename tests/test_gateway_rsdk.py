@@ -100,8 +100,9 @@ def test_every_gimbal_method(rig: dict[str, Any]) -> None:
     assert not model.recording
     sniffer.last("camera_control", lambda f: f["camera_control_command"] == 0x0004)
 
-    ok("camera_mode_switch", camera_mode=1)
-    _osd(cloud, lambda d: d["cameras"][0]["camera_mode"] == 1)
+    # seed 000 has no camera-mode command: "not supported", never a 0 for nothing sent
+    refused = cloud.service("camera_mode_switch", {"payload_index": PI, "camera_mode": 1})["data"]
+    assert refused["result"] == 399001 and "no camera mode command" in refused["output"]["reason"]
 
     # aim at the right edge of the view: yaw turns by half the horizontal field of view (70° → 35°)
     ok("camera_aim", camera_type="wide", locked=False, x=1.0, y=0.5)
@@ -141,7 +142,7 @@ def test_every_gimbal_method(rig: dict[str, Any]) -> None:
 
 
 def test_extension_methods(rig: dict[str, Any]) -> None:
-    cloud, model = rig["cloud"], rig["sim"].model
+    cloud, model, sniffer = rig["cloud"], rig["sim"].model, rig["sniffer"]
     _grab(cloud)
     r = cloud.service("x_rsdk_stiffness_set", {"payload_index": PI, "pitch": 10, "roll": 20, "yaw": 30})
     assert r["data"]["result"] == 0
@@ -169,8 +170,19 @@ def test_extension_methods(rig: dict[str, Any]) -> None:
     )
     assert r["data"]["result"] == 0
     wait_until(lambda: abs(model.yaw.angle + 20) < 0.2 and abs(model.pitch.angle - 10) < 0.2, 3, what="moved")
+    # commands the seed gives no reply frame: sent with CmdType 0, answered once on the bus
     assert cloud.service("x_rsdk_active_track_toggle", {"payload_index": PI})["data"]["result"] == 0
-    assert model.active_track
+    wait_until(lambda: model.active_track, 3, what="tracking toggled")
+    sniffer.last("active_track")
+    assert sniffer.cmd_type_of("active_track") == 0
+    r = cloud.service("x_rsdk_auto_calibration", {"payload_index": PI, "start": True})
+    assert r["data"]["result"] == 0
+    sent = sniffer.last("auto_calibration")
+    assert sent["tlv_buffer"][0]["value"] == 0x03  # start, self-tuning type 1 (seed Figure 29's note)
+    assert sniffer.cmd_type_of("auto_calibration") == 0
+    gimbal = rig["gw"].app.devices.by_sn(SN)
+    wait_until(lambda: gimbal.calibration == (2, 100), 6, what="calibration completed (0x0E 0x10 push)")
+    assert model.calibration_type == 1 and model.calibrations_completed == 1
     # out of the seed's range for this device: refused by the contract before any frame is sent
     r = cloud.service("x_rsdk_stiffness_set", {"payload_index": PI, "pitch": 101, "roll": 0, "yaw": 0})
     assert r["data"]["result"] == 325001

@@ -60,7 +60,15 @@ BRIEF_NAMES = {
     "camera_control",
     "camera_status",
 }
-NO_REPLY = {"param_push", "version_push", "external_control", "calibration_push"}
+# the seed's "This command has no reply frame" entries, and 0x0F/0x11, which it draws without a reply row
+NO_REPLY = {
+    "param_push",
+    "version_push",
+    "external_control",
+    "calibration_push",
+    "auto_calibration",
+    "active_track",
+}
 
 
 def decode_one(raw: bytes) -> Frame:

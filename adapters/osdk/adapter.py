@@ -558,8 +558,12 @@ class AircraftAdapter(SupervisedAdapter):
             raise DeviceRejected(ResultCode.BUSY, "no position from the aircraft yet")
         return wgs84_height - home
 
-    async def _upload(self, points: list[tuple[float, float, float]], speed: float) -> None:
-        """init + one waypoint per point (lat/lon degrees, height above take-off)."""
+    async def _upload(
+        self, points: list[tuple[float, float, float]], speed: float, *, exit_on_rc_lost: bool = False
+    ) -> None:
+        """init + one waypoint per point (lat/lon degrees, height above take-off). ``exit_on_rc_lost``:
+        the mission init's ``action_on_rc_lost`` 0 (exit the mission, the FC's own RC-loss failsafe)
+        instead of 1 (continue)."""
         s = self.settings
         idle = max(1.0, min(float(speed), s.mission_vel_cmd_range))
         init = {
@@ -570,7 +574,7 @@ class AircraftAdapter(SupervisedAdapter):
             "mission_exec_num": 1,
             "yaw_mode": 0,
             "trace_mode": 0,
-            "action_on_rc_lost": 1,
+            "action_on_rc_lost": 0 if exit_on_rc_lost else 1,
             "gimbal_pitch_mode": 0,
         }
         await self._gs("wp_init", init)
@@ -674,7 +678,10 @@ class AircraftAdapter(SupervisedAdapter):
                 (t.latitude or 0.0, t.longitude or 0.0, climb),
                 (data.target_latitude, data.target_longitude, self._relative(data.target_height)),
             ]
-            await self._upload(points, data.max_speed)
+            # takeoff_to_point's exit_wayline_when_rc_lost: 1 exit → init action_on_rc_lost 0; 0 or absent →
+            # 1 continue (the seed's default)
+            exit_on_rc_lost = getattr(data, "exit_wayline_when_rc_lost", None) == 1
+            await self._upload(points, data.max_speed, exit_on_rc_lost=exit_on_rc_lost)
             await self._gs("wp_start_stop", {"start": 0})
         except DeviceRejected as exc:
             self._progress(task, "wayline_failed", 0, exc.result)

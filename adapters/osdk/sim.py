@@ -287,6 +287,10 @@ class OsdkFcModel:
         self.lost_authority_mode = lost_authority_mode
         self.version_name = version_name
         self.subscriptions_refused = 0  # 0x0B commands answered SUBSCRIBE_REFUSED_ACK
+        #: working obstacle sensors (an A3 has none; an M210 front, up and down): they read the height
+        #: above ground downwards and ``obstacle_range`` (m, nothing closer) elsewhere
+        self.obstacle_sensors: set[str] = set()
+        self.obstacle_range = 30.0
         self.version_layout = version_layout  # how 0x00 0x00 is answered: cmds.encode_version_reply
         self.serial = serial  # the flight controller's ID string in the version reply (<= 15 characters)
         self.battery_capacity_mah = 4500
@@ -1238,13 +1242,21 @@ class OsdkFcModel:
 
     def _item_position(self, now: float) -> dict[str, Any]:
         lat, lon = self.to_latlon(self.n, self.e)
-        return {
+        item: dict[str, Any] = {
             "latitude": lat,
             "longitude": lon,
             "altitude": self.home_altitude + self.u,
             "height": self.u,
             "health": 5,
         }
+        # new firmware: RelativePosition obstacle distances (m) and health bits
+        for side in ("down", "front", "right", "back", "left", "up"):
+            working = side in self.obstacle_sensors
+            distance = (self.u if side == "down" else self.obstacle_range) if working else 0.0
+            item[f"obstacle_{side}"] = distance
+            item[f"{side}_health"] = 1 if working else 0
+        item["obstacle_reserved"] = 0
+        return item
 
     def _item_gps(self, now: float) -> dict[str, Any]:
         lat, lon = self.to_latlon(self.n, self.e)

@@ -128,16 +128,18 @@ _GLOBAL_POSITION = (
     _f("health", "B", "", "GPS health 0..5, >3 strong"),
 )
 # bit 5, new FW: GlobalPosition (8+8+4+4+1 = 25) + RelativePosition obstacle distances
-# (6 x f32 = 24, + 1 health-bit byte) = 25 -> 50 bytes.
+# (6 x f32 = 24, + 1 health-bit byte) = 25 -> 50 bytes. Unit: metres. DJI's headers disagree (OSDK 3.3
+# dji_telemetry.hpp says cm for the broadcast, 3.8+ and PSDK say m for broadcast and subscription); the
+# later headers and the gateway's Cloud API conversion (x 1000 -> mm) follow metres.
 POSITION_NEW = BitLayout(
     (
         *_GLOBAL_POSITION,
-        _f("obstacle_down", "f", "cm"),
-        _f("obstacle_front", "f", "cm"),
-        _f("obstacle_right", "f", "cm"),
-        _f("obstacle_back", "f", "cm"),
-        _f("obstacle_left", "f", "cm"),
-        _f("obstacle_up", "f", "cm"),
+        _f("obstacle_down", "f", "m"),
+        _f("obstacle_front", "f", "m"),
+        _f("obstacle_right", "f", "m"),
+        _f("obstacle_back", "f", "m"),
+        _f("obstacle_left", "f", "m"),
+        _f("obstacle_up", "f", "m"),
         _f("obstacle_health", "B"),
     ),
     (

@@ -19,7 +19,7 @@ gimbal_reset 0/1/2/3       0E 0E recenter / 0E 00 yaw 0 + pitch down /          
 camera_photo_take          0D 00 command 0x0001 (shutter)                          327006
 camera_recording_start     0D 00 command 0x0003                                    327007
 camera_recording_stop      0D 00 command 0x0004                                    327008
-camera_mode_switch         none (kept in osd ``cameras[].camera_mode``)            —
+camera_mode_switch         none: seed 000 has no camera-mode command               399001
 camera_focal_length_set    none: R SDK gimbals cannot zoom                         399001
 x_rsdk_*                   0E 03/04/05/06/0E/00/11/12/0F, 0E 09                    314000
 =========================  =====================================================  ==============
@@ -77,6 +77,9 @@ SPEED_TAKE_OVER = 0x88  # bit 7 take over, bit 3 ignore focal length (PROTOCOL-N
 SPEED_RELEASE = 0x08
 RC_PARSE_ERROR = 0x01
 SDK_DEVICE_ID = 0x00000001  # seed §2.3.3: "DJI R SDK"
+#: Gimbal auto calibration (0x0E 0x0F) self-tuning type, bits 7:1 of the control value: seed Figure 29's
+#: note "Self-tuning type selects 1" (single attitude mode).
+SELF_TUNING_TYPE = 1
 
 
 @dataclass
@@ -118,7 +121,8 @@ class GimbalAdapter(SupervisedAdapter):
         self.limits: dict[str, int] | None = None
         self.stiffness: dict[str, int] | None = None
         self.version: str | None = None
-        self.camera_mode = 0
+        self.camera_mode = 0  # R SDK gimbals have no mode command: reported as photo (0)
+        self.calibration: tuple[int, int] | None = None  # auto calibration (status, progress %), pushed
         self.recording = False
         # drag state
         self._drag_speed: tuple[float, float] = (0.0, 0.0)  # yaw, pitch °/s
@@ -267,6 +271,8 @@ class GimbalAdapter(SupervisedAdapter):
             return
         if msg.name == "param_push":
             self._on_push(msg.fields)
+        elif msg.name == "calibration_push":
+            self._on_calibration(msg.fields)
 
     def _on_unsolicited_reply(self, frame: Frame) -> None:
         """Replies to fire-and-forget commands (the start-up version query) still carry news; any
@@ -281,6 +287,19 @@ class GimbalAdapter(SupervisedAdapter):
     def _version_from(self, f: Mapping[str, Any]) -> None:
         v = int(f.get("version", 0))
         self.version = ".".join(f"{(v >> s) & 0xFF:02X}" for s in (24, 16, 8, 0))
+
+    def _on_calibration(self, f: Mapping[str, Any]) -> None:
+        """Auto calibration progress (0x0E 0x10): kept in ``calibration``, each status change logged."""
+        for item in f.get("tlv_buffer", ()):
+            value = item.get("value")
+            if item.get("id") != 0x00 or not isinstance(value, dict):
+                continue  # an unknown or malformed item: the decoder kept it raw
+            status, progress = int(value.get("status", 0)), int(value.get("progress", 0))
+            before = self.calibration
+            self.calibration = (status, progress)
+            if before is None or before[0] != status:
+                text = {0: "idle", 1: "running", 2: "completed", 3: "failed"}.get(status, str(status))
+                log.info("gimbal %s auto calibration %s (%d %%)", self.info.sn, text, progress)
 
     def _on_push(self, f: Mapping[str, Any]) -> None:
         ctrl = f["ctrl_byte"]
@@ -332,7 +351,36 @@ class GimbalAdapter(SupervisedAdapter):
         finally:
             self._pending.pop(frame.seq, None)
 
-    async def _command(self, name: str, fields: Mapping[str, Any], failure: int) -> Message:
+    async def send_confirmed(self, name: str, fields: Mapping[str, Any]) -> None:
+        """Send a command that gets no reply frame (seed: "This command has no reply frame"; CmdType 0)
+        and return once its frames are on the bus: that is all a gimbal will ever say about it."""
+        if not self._online or self._link is None or not self._link.up:
+            raise DeviceNotConnected(f"gimbal {self.info.sn} is not connected")
+        try:
+            frame = build_frame(name, self._next_seq(), fields)
+        except CommandError as exc:
+            raise InvalidParameters(str(exc)) from None
+        if frame.needs_reply:  # pragma: no cover - a table entry with a reply goes through request()
+            raise ValueError(f"{name} gets a reply frame: use request()")
+        done: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        try:
+            self._link.send(
+                segment(encode(frame), self.settings.tx_id),
+                on_sent=lambda: done.done() or done.set_result(None),
+            )
+            await asyncio.wait_for(done, self.settings.request_timeout)
+        except LinkError as exc:
+            raise DeviceNotConnected(str(exc)) from None
+        except TimeoutError:
+            raise DeviceTimeout(f"gimbal {self.info.sn}: {name} could not be put on the bus") from None
+
+    async def _command(self, name: str, fields: Mapping[str, Any], failure: int) -> Message | None:
+        """One command: its reply checked (return code 0, else the result ``failure``), or for a command
+        without a reply frame, its frames on the bus (None)."""
+        spec = lookup(name)
+        if not spec.wants_reply({**spec.when, **fields}):
+            await self.send_confirmed(name, fields)
+            return None
         msg = await self.request(name, fields)
         code = msg.fields.get("return_code", 0)
         if code == 0:
@@ -472,9 +520,12 @@ class GimbalAdapter(SupervisedAdapter):
         return CallResult()
 
     async def _mode_switch(self, data: Any) -> CallResult:
-        # The R SDK has no camera-mode command; the mode decides what shutter means for the operator.
-        self.camera_mode = int(data.camera_mode)
-        return CallResult()
+        # Seed 000 has no camera-mode command (0x0D 0x00 takes a photo or starts/stops recording in any
+        # mode), and an answer of 0 without a frame on the wire would be a fake result.
+        raise MethodNotSupported(
+            "R SDK gimbals have no camera mode command: camera_photo_take and camera_recording_start "
+            "work in any mode"
+        )
 
     async def _zoom(self, data: Any) -> CallResult:
         raise MethodNotSupported("R SDK gimbals have no zoom command (camera_focal_length_set)")
@@ -489,6 +540,7 @@ class GimbalAdapter(SupervisedAdapter):
 
     async def _x_limit_get(self, data: Any) -> CallResult:
         msg = await self._command("get_limit_angle", {"ctrl_byte": 0x01}, ResultCode.BUSY)
+        assert msg is not None  # get_limit_angle has a reply frame
         names = ("pitch_max", "pitch_min", "yaw_max", "yaw_min", "roll_max", "roll_min")
         return CallResult(0, {n: msg.fields[n] for n in names})
 
@@ -504,6 +556,7 @@ class GimbalAdapter(SupervisedAdapter):
 
     async def _x_stiffness_get(self, data: Any) -> CallResult:
         msg = await self._command("get_stiffness", {"ctrl_byte": 0x01}, ResultCode.BUSY)
+        assert msg is not None  # get_stiffness has a reply frame
         f = msg.fields
         return CallResult(
             0, {"pitch": f["pitch_stiffness"], "roll": f["roll_stiffness"], "yaw": f["yaw_stiffness"]}
@@ -535,27 +588,25 @@ class GimbalAdapter(SupervisedAdapter):
         return CallResult()
 
     async def _x_focus(self, data: Any) -> CallResult:
-        # sub-command 0x01 has no reply frame (seed Figure 32): the send is the result
-        if not self._online:
-            raise DeviceNotConnected(f"gimbal {self.info.sn} is not connected")
+        # sub-command 0x01 has no reply frame (seed Figure 32): answered once it is on the bus
         fields = {
             "command_sub_id": 0x01,
             "control_type": 0x00,
             "data_length": 0x02,
             "absolute_position": data.position,
         }
-        try:
-            self._send_no_reply("focus_motor", fields)
-        except LinkError as exc:
-            raise DeviceNotConnected(str(exc)) from None
+        await self._command("focus_motor", fields, ResultCode.BUSY)
         return CallResult()
 
     async def _x_calibration(self, data: Any) -> CallResult:
-        item = {"id": 0x00, "value": 0x01 if data.start else 0x00}
+        # seed Figure 29: bit 0 start/stop, bits 7:1 the self-tuning type, and "Self-tuning type selects
+        # 1" (single attitude mode): start 0x03, stop 0x02. No reply frame: answered once on the bus.
+        item = {"id": 0x00, "value": (SELF_TUNING_TYPE << 1) | (0x01 if data.start else 0x00)}
         await self._command("auto_calibration", {"tlv_buffer": [item]}, ResultCode.BUSY)
         return CallResult()
 
     async def _x_version(self, data: Any) -> CallResult:
         msg = await self._command("get_version", {"device_id": SDK_DEVICE_ID}, ResultCode.BUSY)
+        assert msg is not None  # get_version has a reply frame
         self._version_from(msg.fields)
         return CallResult(0, {"device_id": msg.fields["device_id"], "version": self.version})

@@ -708,11 +708,12 @@ _ENTRIES: tuple[Command, ...] = (
         0x0E,
         0x0F,
         TlvCodec(Layout(), "tlv_buffer", (SELF_TUNING_CONTROL,)),
-        # The seed draws no reply for 0x0F. Assumed like its TLV siblings (0x0B/0x0C): a return code,
-        # then possibly TLV items; a bare return code decodes too.
-        TlvCodec(RC, "tlv_buffer", (SELF_TUNING_CONTROL,)),
+        # The seed draws only a command frame for 0x0F (Figure 29) and reports progress by the 0x10
+        # push: no reply frame, sent with CmdType 0 (a gimbal would never answer a reply request).
+        None,
         "2.3.4.16",
         HOST,
+        "no reply frame: progress comes as calibration_push (0x0E 0x10)",
     ),
     Command(
         "calibration_push",
@@ -730,11 +731,12 @@ _ENTRIES: tuple[Command, ...] = (
         0x11,
         # The seed's field is "Enable ActiveTrack"; only 0x03 (toggle tracking) is defined.
         Layout([u8("enable_active_track", "0x03: switch the start or stop status of tracking")]),
-        # The seed draws no reply row for 0x11 (its caption is copied from Figure 30); assumed to
-        # answer with a return code like every other setting.
-        RC,
+        # The seed draws only a command frame for 0x11 (Figure 31, its caption copied from Figure 30):
+        # no reply frame, sent with CmdType 0.
+        None,
         "2.3.4.18",
         HOST,
+        "no reply frame",
     ),
     Command(
         "focus_motor",

@@ -44,6 +44,16 @@ class _Listener(can.Listener):
         self._link._from_thread(self._link._failed, f"receive failed: {type(exc).__name__}: {exc}")
 
 
+class _Sent:
+    """A marker queued after a command's CAN frames: the sender calls ``done`` in the loop once they
+    are on the bus (commands that get no reply frame are complete then)."""
+
+    __slots__ = ("done",)
+
+    def __init__(self, done: Callable[[], None]) -> None:
+        self.done = done
+
+
 class CanLink:
     def __init__(
         self,
@@ -64,7 +74,7 @@ class CanLink:
         self._loop = loop
         self._bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
-        self._sendq: queue.SimpleQueue[can.Message | None] = queue.SimpleQueue()
+        self._sendq: queue.SimpleQueue[can.Message | _Sent | None] = queue.SimpleQueue()
         self._sender: threading.Thread | None = None
         self._up = False
         self.frames_in = 0
@@ -100,12 +110,15 @@ class CanLink:
         kwargs.setdefault("receive_own_messages", False)
         return can.Bus(**kwargs)
 
-    def send(self, frames: list[tuple[int, bytes]]) -> None:
-        """Queue CAN frames in order; raises LinkError when the link is down."""
+    def send(self, frames: list[tuple[int, bytes]], on_sent: Callable[[], None] | None = None) -> None:
+        """Queue CAN frames in order; raises LinkError when the link is down. ``on_sent`` runs in the
+        loop once the last of them is on the bus (never, if the bus fails first)."""
         if not self._up:
             raise LinkError("CAN link is down")
         for arb_id, data in frames:
             self._sendq.put(can.Message(arbitration_id=arb_id, data=data, is_extended_id=False))
+        if on_sent is not None:
+            self._sendq.put(_Sent(on_sent))
 
     def close(self) -> None:
         self._up = False
@@ -129,11 +142,14 @@ class CanLink:
             self._bus = None
 
     # -- threads ----------------------------------------------------------------------------------
-    def _send_loop(self, bus: can.BusABC, q: queue.SimpleQueue[can.Message | None]) -> None:
+    def _send_loop(self, bus: can.BusABC, q: queue.SimpleQueue[can.Message | _Sent | None]) -> None:
         while True:
             msg = q.get()
             if msg is None:
                 return
+            if isinstance(msg, _Sent):
+                self._from_thread(msg.done)
+                continue
             try:
                 bus.send(msg, timeout=0.2)
                 self.frames_out += 1

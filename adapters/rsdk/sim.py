@@ -38,6 +38,8 @@ __all__ = ["GimbalCanSim", "GimbalModel", "GimbalNode", "SlcanGimbal", "main"]
 
 SPEED_HOLD_S = 0.5  # seed §2.3.4.2: one speed command controls for 0.5 s
 PUSH_PERIOD_S = 0.1  # 10 Hz parameter push
+CALIBRATION_S = 2.0  # a simulated auto calibration takes this long (a real one takes minutes)
+CALIBRATION_PUSH_S = 0.5  # its progress push (0x0E 0x10) period
 DEFAULT_VERSION = 0x01020304  # shows as 01.02.03.04
 RC_OK, RC_PARSE_ERROR, RC_FAILED = 0x00, 0x01, 0x02
 
@@ -133,6 +135,12 @@ class GimbalModel:
     photos: int = 0
     follow_mode: int = 0
     active_track: bool = False
+    #: auto calibration (0x0E 0x0F): None when idle, else when it started; progress is pushed (0x0E 0x10)
+    #: every CALIBRATION_PUSH_S until it completes after CALIBRATION_S
+    calibration_started: float | None = None
+    calibration_type: int | None = None  # the self-tuning type of the last start (seed: 1)
+    calibrations_completed: int = 0
+    _next_calibration_push: float = 0.0
     speed_until: float = 0.0
     received: Counter[str] = field(default_factory=Counter)
     faults: ReplyFaults = field(default_factory=ReplyFaults)
@@ -200,6 +208,7 @@ class GimbalModel:
         due = [r for t, r in self._late if t <= now]
         if due:
             self._late = [(t, r) for t, r in self._late if t > now]
+        due += self._calibration_push(now)
         if not self.push_enabled or now < self._next_push:
             return due
         self._next_push = now + PUSH_PERIOD_S
@@ -318,6 +327,33 @@ class GimbalModel:
             return {"return_code": RC_FAILED}
         self.follow_mode = f["operating_mode"]
         return {"return_code": RC_OK}
+
+    def _on_auto_calibration(self, f: dict[str, Any], now: float) -> dict[str, Any]:
+        """No reply frame (seed Figure 29): bit 0 starts/stops, bits 7:1 are the self-tuning type."""
+        for item in f["tlv_buffer"]:
+            if item.get("id") != 0x00:
+                continue
+            value = int(item["value"])
+            if value & 0x01:
+                self.calibration_started, self.calibration_type = now, value >> 1
+                self._next_calibration_push = now
+            else:
+                self.calibration_started = None
+        return {"return_code": RC_OK}
+
+    def _calibration_push(self, now: float) -> list[bytes]:
+        started = self.calibration_started
+        if started is None or now < self._next_calibration_push:
+            return []
+        self._next_calibration_push = now + CALIBRATION_PUSH_S
+        progress = min(100, int((now - started) / CALIBRATION_S * 100))
+        status = 2 if progress >= 100 else 1
+        if status == 2:
+            self.calibration_started = None
+            self.calibrations_completed += 1
+        item = {"id": 0x00, "value": {"status": status, "progress": progress, "error": bytes(4)}}
+        self._push_seq = (self._push_seq + 1) & 0xFFFF
+        return [encode(build_frame("calibration_push", self._push_seq, {"tlv_buffer": [item]}))]
 
     def _on_active_track(self, f: dict[str, Any], now: float) -> dict[str, Any]:
         if f["enable_active_track"] == 0x03:
