@@ -159,6 +159,9 @@ class Northbound:
         self.metrics.set("device_online", 1 if online else 0, device=sn)
         log.info("device %s is %s", sn, "online" if online else "offline")
         self.publish_topology()
+        adapter = self.devices.by_sn(sn)
+        if online and adapter is not None:  # what it is (firmware, authority) as soon as it is there
+            self.publish_state(adapter)
 
     def authority_lost(self, sn: str) -> None:
         auth = self.devices.authority

@@ -187,13 +187,14 @@ def _simulate_robots(settings: GatewaySettings, sims: list[Any]) -> GatewaySetti
 def _simulate_aircraft(settings: GatewaySettings, sims: list[Any]) -> GatewaySettings:
     """Start an Onboard SDK flight-controller simulator on a loopback TCP port for every aircraft
     whose url is ``SIM_AIRCRAFT_URL``, and point the aircraft's url at it."""
-    from adapters.osdk.sim import OsdkFcDevice
+    from adapters.osdk.sim import OsdkFcDevice, OsdkFcModel
     from adapters.simio import TcpEndpoint
 
     devices = []
     for d in settings.devices:
         if d.type == "osdk" and d.url == SIM_AIRCRAFT_URL:
-            endpoint = TcpEndpoint(OsdkFcDevice()).start()
+            # the simulated flight controller speaks the firmware the device entry says (new or m100)
+            endpoint = TcpEndpoint(OsdkFcDevice(OsdkFcModel(firmware=d.firmware))).start()
             sims.append(endpoint)
             d = d.model_copy(update={"url": endpoint.url})
             log.info("simulated aircraft %s at %s", d.sn, endpoint.url)

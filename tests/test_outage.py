@@ -91,7 +91,7 @@ def test_no_progress_event_is_lost_across_a_broker_outage() -> None:
         adapter = gw.app.devices.by_sn("OSDK-OUT-1")
         asyncio.run_coroutine_threadsafe(adapter._obtain(1), gw.loop).result(5)
         gw.app.devices.authority.flight.add("OSDK-OUT-1")
-        asyncio.run_coroutine_threadsafe(adapter._flight_task(1), gw.loop).result(5)
+        asyncio.run_coroutine_threadsafe(adapter._flight_task("takeoff"), gw.loop).result(5)
         wait_until(lambda: fc.inspect(lambda m: m.in_air and m.display_mode == 6), 10, what="airborne")
         home = (adapter.telemetry.latitude, adapter.telemetry.longitude)
         alt = adapter.telemetry.home_altitude

@@ -51,7 +51,7 @@ from adapters.base import (
     TelemetrySink,
 )
 from adapters.osdk import commands as cmds
-from adapters.osdk.config import OsdkDeviceSettings
+from adapters.osdk.config import DEFAULT_FREQUENCIES, OsdkDeviceSettings
 from adapters.osdk.protocol import (
     Decoder,
     DuplicateFilter,
@@ -60,6 +60,7 @@ from adapters.osdk.protocol import (
     SessionsExhausted,
     SessionTable,
 )
+from adapters.osdk.telemetry import ITEMS as _TELEMETRY_ITEMS
 from adapters.serial_link import LinkError, SerialLink
 from adapters.supervision import SupervisedAdapter
 from adapters.wire.layout import LayoutError
@@ -72,11 +73,9 @@ __all__ = ["AircraftAdapter"]
 
 EARTH_RADIUS_M = 6_378_137.0
 OBTAIN_RETRIES = 5  # "in progress" answers before giving up
-ON_GROUND, IN_AIR = 1, 2
 CONTROL_OBTAINED, CONTROL_RELEASED = 0x0002, 0x0001
 CONTROL_IN_PROGRESS = (0x0003, 0x0004)
 CONTROL_RC_OWNS = (0x0000, 0x0005, 0x0006)
-TASK_TAKEOFF, TASK_LAND, TASK_GO_HOME = 1, 2, 6
 AUTO_TAKEOFF = 11  # display mode while the FC's own take-off runs: missions are refused until it ends
 
 
@@ -137,6 +136,8 @@ class AircraftAdapter(SupervisedAdapter):
     def __init__(self, settings: OsdkDeviceSettings, *, now: Callable[[], float] = time.monotonic) -> None:
         self.settings = settings
         self.fw = settings.firmware
+        self.codes = cmds.FIRMWARE_CODES[self.fw]  # task codes, ACKs and status values of this firmware
+        self._task_seq = 0  # M100 flight tasks carry a command sequence number
         super().__init__(DeviceInfo.of(settings.sn, settings.product), settings, now)
         self.deadline = settings.deadline
         self._decoder = Decoder()
@@ -196,12 +197,34 @@ class AircraftAdapter(SupervisedAdapter):
         if self.mission is not None and not self.mission.finished:
             with contextlib.suppress(Exception):
                 self._fire("wp_start_stop", {"start": 1})
-        if self.settings.on_stop == "land" and self.telemetry.flight == IN_AIR:
+        if self.settings.on_stop == "land" and self.in_air:
             with contextlib.suppress(Exception):
-                self._fire("flight_task", {"command": TASK_LAND})
-        elif self.settings.on_stop == "go_home" and self.telemetry.flight == IN_AIR:
+                self._fire("flight_task", self._task_fields("landing"))
+        elif self.settings.on_stop == "go_home" and self.in_air:
             with contextlib.suppress(Exception):
-                self._fire("flight_task", {"command": TASK_GO_HOME})
+                self._fire("flight_task", self._task_fields("go_home"))
+
+    def _broadcast_codes(self) -> list[int]:
+        """The 0x00 0x10 rate codes: one per flight-data item, in this firmware's item order. The default
+        rates are written in the new firmware's order; an M100 gets the same rate per item *name* (its
+        status is item 9, not 11). A list from the configuration is sent as written."""
+        codes = list(self.settings.frequencies)
+        if self.fw == "new" or codes != DEFAULT_FREQUENCIES:
+            return codes
+        rate = dict(zip((it.name for it in _TELEMETRY_ITEMS["new"]), codes, strict=False))
+        legacy = [rate.get(it.name, 0) for it in _TELEMETRY_ITEMS[self.fw]]
+        return legacy + [0] * (len(codes) - len(legacy))
+
+    @property
+    def in_air(self) -> bool:
+        return self.telemetry.flight in self.codes.in_air
+
+    def _task_fields(self, task: str) -> dict[str, Any]:
+        fields: dict[str, Any] = {"command": self.codes.tasks[task]}
+        if self.fw == "m100":
+            self._task_seq = (self._task_seq + 1) & 0xFF
+            fields["cmd_sequence"] = self._task_seq
+        return fields
 
     # -- movement control (used by DRC) ------------------------------------------------------------
     def send_movement(self, forward: float, right: float, up: float, yaw_rate: float) -> None:
@@ -228,8 +251,10 @@ class AircraftAdapter(SupervisedAdapter):
         return True
 
     def emergency_stop(self) -> None:
-        """Brake now (the 26-byte emergency brake, firmware >= 3.2.36.6) and zero velocity after it."""
-        self.emergency_brake()
+        """Brake now (the 26-byte emergency brake, firmware >= 3.2.36.6; an M100 has none) and zero
+        velocity with the stable bit after it."""
+        if self.codes.emergency_brake:
+            self.emergency_brake()
         self.send_movement(0.0, 0.0, 0.0, 0.0)
 
     # -- link supervision (the loop is SupervisedAdapter's) ----------------------------------------
@@ -278,7 +303,7 @@ class AircraftAdapter(SupervisedAdapter):
                 self.activation_error = text
                 return
             self.activation_error = None
-            await self.command("set_broadcast_frequency", {"frequency": list(s.frequencies)})
+            await self.command("set_broadcast_frequency", {"frequency": self._broadcast_codes()})
             self.activated = True
             log.info("aircraft %s activated (firmware %s)", self.info.sn, self.version or "?")
         except (DeviceTimeout, DeviceNotConnected) as exc:
@@ -472,7 +497,7 @@ class AircraftAdapter(SupervisedAdapter):
         t = self.telemetry
         if t.flight is None:
             return 14  # not connected
-        if t.flight != IN_AIR:
+        if t.flight not in self.codes.in_air:
             return 0  # standby
         if self.mission is not None and not self.mission.finished:
             return 5  # wayline
@@ -545,12 +570,14 @@ class AircraftAdapter(SupervisedAdapter):
         await self._obtain(1)
         return CallResult()
 
-    async def _flight_task(self, command: int) -> None:
-        msg = await self.command("flight_task", {"command": command})
+    async def _flight_task(self, task: str) -> None:
+        """``task``: takeoff, landing or go_home, in this firmware's codes (cmds.FIRMWARE_CODES)."""
+        fields = self._task_fields(task)
+        msg = await self.command("flight_task", fields)
         code = int(msg.fields["ack"])
-        if code != 0:
-            text = cmds.FLIGHT_TASK_ACK.get(code, "unknown flight task ACK")
-            raise DeviceRejected(ResultCode.BUSY, f"flight task {command} refused: {text} ({code})")
+        if code != self.codes.task_ok:
+            text = self.codes.task_ack.get(code, "unknown flight task ACK")
+            raise DeviceRejected(ResultCode.BUSY, f"flight task {task} refused: {text} ({code})")
 
     def _relative(self, wgs84_height: float) -> float:
         home = self.telemetry.home_altitude
@@ -624,7 +651,7 @@ class AircraftAdapter(SupervisedAdapter):
         if data.max_speed <= 0:
             raise InvalidParameters("max_speed must be at least 1 m/s to fly")
         t = self.telemetry
-        if t.flight != IN_AIR:
+        if t.flight not in self.codes.in_air:
             raise DeviceRejected(
                 ResultCode.BUSY, "fly_to_point needs the aircraft in the air (use takeoff_to_point)"
             )
@@ -652,9 +679,9 @@ class AircraftAdapter(SupervisedAdapter):
 
     async def _takeoff_to_point(self, data: Any) -> CallResult:
         self._require_online()
-        if self.telemetry.flight == IN_AIR:
+        if self.in_air:
             raise DeviceRejected(ResultCode.BUSY, "the aircraft is already in the air")
-        await self._flight_task(TASK_TAKEOFF)
+        await self._flight_task("takeoff")
         task = Task("takeoff", data.flight_id, 2)
         self.mission = task
         self._progress(task, "task_ready", 0)
@@ -667,7 +694,7 @@ class AircraftAdapter(SupervisedAdapter):
         """After the take-off ACK: wait until airborne, then fly up and over to the target."""
         deadline = self._now() + self.settings.takeoff_timeout
         t = self.telemetry
-        while not (t.flight == IN_AIR and (t.height or 0.0) >= 1.0 and t.display_mode != AUTO_TAKEOFF):
+        while not (self.in_air and (t.height or 0.0) >= 1.0 and t.display_mode != AUTO_TAKEOFF):
             if self._now() > deadline:
                 self._progress(task, "wayline_failed", 0, ResultCode.DEVICE_TIMEOUT)
                 return
@@ -795,8 +822,8 @@ async def _ext_followme_target(adapter: AircraftAdapter, data: Any) -> CallResul
     return CallResult()
 
 
-async def _ext_task(adapter: AircraftAdapter, command: int) -> CallResult:
-    await adapter._flight_task(command)
+async def _ext_task(adapter: AircraftAdapter, task: str) -> CallResult:
+    await adapter._flight_task(task)
     return CallResult()
 
 
@@ -828,8 +855,8 @@ _EXTENSION_CALLS: dict[str, Callable[[AircraftAdapter, Any], Any]] = {
     "x_osdk_followme_stop": lambda a, d: _ext_plain(a, "fm_stop"),
     "x_osdk_followme_pause": lambda a, d: _ext_pause(a, "fm_pause_resume", d),
     "x_osdk_followme_target": _ext_followme_target,
-    "x_osdk_land": lambda a, d: _ext_task(a, TASK_LAND),
-    "x_osdk_go_home": lambda a, d: _ext_task(a, TASK_GO_HOME),
+    "x_osdk_land": lambda a, d: _ext_task(a, "landing"),
+    "x_osdk_go_home": lambda a, d: _ext_task(a, "go_home"),
     "x_osdk_authority_release": _ext_release,
 }
 

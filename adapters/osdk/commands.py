@@ -37,6 +37,7 @@ __all__ = [
     "COMMAND_NAMES",
     "CONTROL_ACK",
     "EMERGENCY_BRAKE_FLAG",
+    "FIRMWARE_CODES",
     "FLIGHT_TASKS",
     "FLIGHT_TASKS_M100",
     "FLIGHT_TASK_ACK",
@@ -50,6 +51,8 @@ __all__ = [
     "TO_FC",
     "VERSION_ACK",
     "CommandSpec",
+    "DroneVersion",
+    "FirmwareCodes",
     "Message",
     "Union",
     "UnknownCommand",
@@ -59,7 +62,9 @@ __all__ = [
     "decode_request",
     "encode_ack_payload",
     "encode_request",
+    "encode_version_reply",
     "examples_of",
+    "parse_version_reply",
     "spec_for",
     "specs_at",
     "split_control_flag",
@@ -191,6 +196,42 @@ FLIGHT_TASK_ACK: dict[int, str] = {
 }
 FLIGHT_TASKS_M100: dict[int, str] = {1: "go_home", 4: "takeoff", 6: "landing"}
 FLIGHT_TASK_M100_ACK: dict[int, str] = {0x0001: "execution failed", 0x0002: "started executing"}
+
+
+@dataclass(frozen=True, slots=True)
+class FirmwareCodes:
+    """What differs between the two flight-controller generations for the same intent: one row per
+    firmware, so the adapter says "take off" and never a number (seed 004; PROTOCOL-NOTES)."""
+
+    tasks: Mapping[str, int]  # intent -> 0x01 0x01 command code
+    task_ok: int  # the 0x01 0x01 ACK that means the task started
+    task_ack: Mapping[int, str]
+    in_air: frozenset[int]  # 0x02 0x00 status.flight values in the air
+    on_ground: frozenset[int]
+    emergency_brake: bool  # the 26-byte brake (0x01 0x03 advanced) exists
+
+
+FIRMWARE_CODES: dict[str, FirmwareCodes] = {
+    # A3/N3/M600/M210 (OSDK 3.x): flight status 0 stopped, 1 on ground, 2 in air
+    "new": FirmwareCodes(
+        tasks={"takeoff": 1, "landing": 2, "go_home": 6},
+        task_ok=0,
+        task_ack=FLIGHT_TASK_ACK,
+        in_air=frozenset({2}),
+        on_ground=frozenset({0, 1}),
+        emergency_brake=True,
+    ),
+    # M100 legacy firmware: tasks 1 go home, 4 take off, 6 landing, ACK 0x0002 = started; flight status
+    # 1 standby, 2 taking off, 3 in air, 4 landing, 5 landed
+    "m100": FirmwareCodes(
+        tasks={"takeoff": 4, "landing": 6, "go_home": 1},
+        task_ok=0x0002,
+        task_ack=FLIGHT_TASK_M100_ACK,
+        in_air=frozenset({3}),
+        on_ground=frozenset({1, 5}),
+        emergency_brake=False,
+    ),
+}
 ARM_ACK: dict[int, str] = {0: "success", 1: "obtain control first", 2: "already in that state", 3: "in air"}
 LOST_AUTHORITY_ACK: dict[int, str] = {0x0000: "received"}
 

@@ -80,6 +80,7 @@ from adapters.osdk.commands import (
     split_control_flag,
 )
 from adapters.osdk.protocol import BadFrame, Decoder, DuplicateFilter, Frame, SessionMode, SessionTable
+from adapters.osdk.telemetry import ITEMS as TELEMETRY_ITEMS
 from adapters.osdk.telemetry import NEW_ITEMS, encode_flight_data
 from adapters.simio import PtyEndpoint, TcpEndpoint
 from adapters.wire.layout import LayoutError
@@ -102,6 +103,8 @@ T = TypeVar("T")
 EARTH_RADIUS_M = 6378137.0  # flat-earth approximation around home (module docstring)
 DEFAULT_HOME = (22.5431, 113.9580)  # degrees
 NOT_ACTIVATED_ACK = 0xFF01  # OSDK ErrorCode::CommonACK::NO_AUTHORIZATION_ERROR
+M100_TASK_STARTED, M100_TASK_FAILED = 0x0002, 0x0001  # M100 0x01 0x01 ACKs (FLIGHT_TASK_M100_ACK)
+M100_VERSION_NAME = "SDK-v1.0 BETA M100-02.03.00.00"  # an M100 on the legacy (2.3) protocol; illustrative
 NO_RIGHTS_ACK = 0xFF02  # OSDK ErrorCode::CommonACK::NO_RIGHTS_ERROR (flight task without authority)
 #: A command the simulated FC does not implement, asking for an answer: u16 OSDK
 #: ``ErrorCode::CommonACK::KEY_ERROR`` (0xFF00). Which code real firmware uses is not confirmed; what
@@ -263,12 +266,24 @@ class OsdkFcModel:
         battery_percent: float = 95.0,
         reach_pre_action_events: bool = False,
         lost_authority_mode: SessionMode = SessionMode.ACK_REQUIRED,
-        version_name: str = "SDK-v1.1 BETA A3-03.03.100.00",
-        version_layout: str = "id",
+        version_name: str | None = None,
+        version_layout: str | None = None,
         serial: str = "SIMFC0000000001",
+        firmware: str = "new",
     ) -> None:
         if unactivated not in ("ack", "ignore"):
             raise ValueError("unactivated must be 'ack' or 'ignore'")
+        if firmware not in ("new", "m100"):
+            raise ValueError("firmware must be 'new' or 'm100'")
+        #: "new" (A3/N3/M600/M210, OSDK 3.x) or "m100" (legacy codes, status values and telemetry layout)
+        self.firmware = firmware
+        legacy = firmware == "m100"
+        if version_name is None:
+            version_name = M100_VERSION_NAME if legacy else "SDK-v1.1 BETA A3-03.03.100.00"
+        if version_layout is None:
+            version_layout = "crc" if legacy else "id"
+        self._item_names = tuple(it.name for it in TELEMETRY_ITEMS[firmware])
+        self._flown = False  # an M100 reports "landed" (5), not "standby" (1), after a flight
         # configuration (plain attributes: tests change them between steps)
         self.app_id = app_id  # None accepts any app id
         self.home_lat, self.home_lon = math.radians(home[0]), math.radians(home[1])
@@ -343,8 +358,8 @@ class OsdkFcModel:
         self._t0: float | None = None
         self._last: float | None = None
         self._t = 0.0
-        self._rates = [DEFAULT_RATES[n] for n in ITEM_NAMES]
-        self._due: list[float | None] = [None] * len(ITEM_NAMES)
+        self._rates = [DEFAULT_RATES[n] for n in self._item_names]
+        self._due: list[float | None] = [None] * len(self._item_names)
         self._next_status = 0.0
         self._gps_counter = 0
         self._tasks: dict[str, Callable[[], tuple[float, float, float]]] = {
@@ -359,7 +374,7 @@ class OsdkFcModel:
             "follow_me": self._fly_follow,
         }
         self._items: dict[str, Callable[[float], dict[str, Any]]] = {
-            name: getattr(self, f"_item_{name}") for name in ITEM_NAMES
+            name: getattr(self, f"_item_{name}") for name in self._item_names
         }
 
     # -- geometry ----------------------------------------------------------------------------------
@@ -387,6 +402,14 @@ class OsdkFcModel:
 
     @property
     def flight_status(self) -> int:
+        if self.firmware == "m100":  # 1 standby, 2 taking off, 3 in air, 4 landing, 5 landed
+            if self.task == "takeoff":
+                return 2
+            if self.task == "landing":
+                return 4
+            if self.in_air:
+                return 3
+            return 5 if self._flown else 1
         return IN_AIR if self.in_air else ON_GROUND if self.motors_on else STOPPED
 
     @property
@@ -413,7 +436,7 @@ class OsdkFcModel:
         if self.in_air and self.task not in ("landing",):
             self._abort_missions()
             self._enter_hover(None)
-        payload = cmds.encode_request("lost_authority_push", {"reason": 4})
+        payload = cmds.encode_request("lost_authority_push", {"reason": 4}, self.firmware)
         sent = self._table.send(0x02, 0x01, payload, now=now, mode=self.lost_authority_mode, timeout=0.5)
         self._emit(sent.frame, now)
 
@@ -469,8 +492,8 @@ class OsdkFcModel:
         self._queue_ack(self._dups.ack(frame, value), now)  # stored for re-sends of the same seq
 
     def _push(self, name: str, fields: Mapping[str, Any], now: float) -> None:
-        spec = cmds.spec_for(name)
-        payload = cmds.encode_request(name, fields)
+        spec = cmds.spec_for(name, self.firmware)
+        payload = cmds.encode_request(name, fields, self.firmware)
         self._emit(
             self._table.send(spec.cmd_set, spec.cmd_id, payload, now=now, mode=SessionMode.NO_ACK).frame, now
         )
@@ -490,7 +513,7 @@ class OsdkFcModel:
             return
         cmd_set, cmd_id = frame.cmd_set, frame.cmd_id
         assert cmd_set is not None and cmd_id is not None  # the decoder drops shorter command frames
-        specs = [s for s in cmds.specs_at(cmd_set, cmd_id) if s.direction == TO_FC]
+        specs = [s for s in cmds.specs_at(cmd_set, cmd_id, self.firmware) if s.direction == TO_FC]
         if not specs:
             # A real flight controller answers every command that asks for an answer; silence would
             # leave a client such as DJI's Onboard-SDK library waiting on its ACK until it times out.
@@ -509,7 +532,7 @@ class OsdkFcModel:
                 self._ack(frame, NOT_ACTIVATED_ACK.to_bytes(2, "little"), now)
             return
         try:
-            msg = cmds.decode_request(cmd_set, cmd_id, frame.payload)
+            msg = cmds.decode_request(cmd_set, cmd_id, frame.payload, self.firmware)
         except LayoutError:
             self.bad_payloads += 1
             code = _BAD_PAYLOAD_ACK.get(specs[0].name, _GS_INVALID if cmd_set == 0x03 else None)
@@ -520,7 +543,7 @@ class OsdkFcModel:
         try:
             reply = getattr(self, f"_on_{msg.name}")(msg.fields, now)
             if frame.session and reply is not None:
-                self._ack(frame, cmds.encode_ack_payload(msg.name, reply), now)
+                self._ack(frame, cmds.encode_ack_payload(msg.name, reply, self.firmware), now)
         except (LayoutError, ValueError, KeyError) as exc:
             self.errors += 1
             log.warning("simulated FC could not handle %s: %s", msg.name, exc)
@@ -550,7 +573,7 @@ class OsdkFcModel:
         codes = list(f["frequency"])
         if any(c not in RATE_HZ and c != RATE_KEEP for c in codes):
             return {"ack": 1}
-        for i, code in enumerate(codes[: len(ITEM_NAMES)]):  # bytes 14, 15: no item on this firmware
+        for i, code in enumerate(codes[: len(self._item_names)]):  # the rest: no item on this firmware
             if code != RATE_KEEP:
                 self._rates[i] = RATE_HZ[code]
                 self._due[i] = now
@@ -574,6 +597,10 @@ class OsdkFcModel:
     def _on_flight_task(self, f: dict[str, Any], now: float) -> dict[str, Any]:
         if not self.sdk_control:
             return {"ack": NO_RIGHTS_ACK}
+        if self.firmware == "m100":  # 1 go home, 4 take off, 6 landing; ACK 0x0002 started, 0x0001 failed
+            legacy = _FLIGHT_TASKS_M100.get(f["command"])
+            result = 10 if legacy is None else legacy(self)
+            return {"ack": M100_TASK_STARTED if result == 0 else M100_TASK_FAILED}
         action = _FLIGHT_TASKS.get(f["command"])
         return {"ack": 10 if action is None else action(self)}
 
@@ -994,6 +1021,7 @@ class OsdkFcModel:
     def _ground_contact(self) -> None:
         if self.task == "takeoff" and not self.in_air and self.u >= 0.1:
             self.in_air = True
+            self._flown = True
         if self.u > 0.0 or (self.task == "takeoff" and self.vu > 0):
             return
         self.u = 0.0
@@ -1206,7 +1234,7 @@ class OsdkFcModel:
 
     def _telemetry(self, now: float) -> None:
         due: list[str] = []
-        for i, name in enumerate(ITEM_NAMES):
+        for i, name in enumerate(self._item_names):
             hz = self._rates[i]
             if hz <= 0:
                 continue
@@ -1220,7 +1248,10 @@ class OsdkFcModel:
                     nd = now + 1.0 / hz
             self._due[i] = nd
         if due:
-            payload = encode_flight_data({name: self._items[name](now) for name in due})
+            items = {name: self._items[name](now) for name in due}
+            if self.firmware == "m100":
+                items = {name: _m100_item(name, fields) for name, fields in items.items()}
+            payload = encode_flight_data(items, self.firmware)
             self._emit(self._table.send(0x02, 0x00, payload, now=now, mode=SessionMode.NO_ACK).frame, now)
 
     def _item_timestamp(self, now: float) -> dict[str, Any]:
@@ -1313,6 +1344,11 @@ class OsdkFcModel:
 
 
 # Flight task codes (FLIGHT_TASKS) -> what the FC does; each returns the FLIGHT_TASK_ACK code.
+_FLIGHT_TASKS_M100: dict[int, Callable[[OsdkFcModel], int]] = {
+    1: OsdkFcModel._task_go_home,
+    4: OsdkFcModel._task_takeoff,
+    6: OsdkFcModel._task_landing,
+}
 _FLIGHT_TASKS: dict[int, Callable[[OsdkFcModel], int]] = {
     1: OsdkFcModel._task_takeoff,
     2: OsdkFcModel._task_landing,
@@ -1323,6 +1359,25 @@ _FLIGHT_TASKS: dict[int, Callable[[OsdkFcModel], int]] = {
     13: lambda m: m._exit("takeoff"),
     14: lambda m: m._exit("landing"),
 }
+
+
+def _m100_item(name: str, fields: dict[str, Any]) -> dict[str, Any]:
+    """A new-firmware item body in the M100 layout of the same item (adapters.osdk.telemetry)."""
+    if name == "timestamp":
+        return {
+            "time": fields["time_ms"] // 2,
+            "nano_time": fields["time_ns"],
+            "sync_flag": 0,
+        }  # 500 Hz ticks
+    if name == "velocity":
+        return {**fields, "sensor_id": 0}
+    if name == "position":
+        return {k: fields[k] for k in ("latitude", "longitude", "altitude", "height", "health")}
+    if name == "status":
+        return {"flight": fields["flight"]}
+    if name == "battery":
+        return {"percentage": fields["percentage"]}
+    return fields
 
 
 def _no_action(m: OsdkFcModel, param: int) -> int:
@@ -1449,8 +1504,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     p.add_argument("--rc-mode", choices=("F", "P", "A"), default="F", help="RC mode switch (default F)")
     p.add_argument("--max-distance", type=float, default=2000.0, help="waypoint limit from home, m")
+    p.add_argument(
+        "--firmware",
+        choices=("new", "m100"),
+        default="new",
+        help="new: A3/N3/M600/M210 (OSDK 3.x, default); m100: the M100's legacy codes, status and telemetry",
+    )
     ns = p.parse_args(argv)
-    model = OsdkFcModel(app_id=ns.app_id, home=ns.home, rc_mode=ns.rc_mode, max_distance_m=ns.max_distance)
+    model = OsdkFcModel(
+        app_id=ns.app_id,
+        home=ns.home,
+        rc_mode=ns.rc_mode,
+        max_distance_m=ns.max_distance,
+        firmware=ns.firmware,
+    )
     device = OsdkFcDevice(model)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -1465,7 +1532,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     runner.start()
     print(f"OSDK flight controller simulator at {place}", flush=True)
     app = "any app id" if ns.app_id is None else f"app id {ns.app_id}"
-    print(f"gateway port: {place} (activation accepts {app}; home {ns.home[0]},{ns.home[1]})", flush=True)
+    print(
+        f"gateway port: {place} (activation accepts {app}; home {ns.home[0]},{ns.home[1]}; "
+        f"firmware {ns.firmware})",
+        flush=True,
+    )
     with contextlib.suppress(KeyboardInterrupt):
         stop.wait()
     runner.stop()
