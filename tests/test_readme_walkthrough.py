@@ -107,8 +107,18 @@ def test_the_walkthrough_moves_the_gimbal_and_flies_the_drone() -> None:
     procs: list[subprocess.Popen[str]] = []
 
     def start(argv: list[str], term_env: dict[str, str]) -> tuple[subprocess.Popen[str], list[str]]:
+        # A terminal delivers Ctrl-C. A test run started in the background by a non-interactive shell
+        # (`make test &`) inherits SIGINT *ignored*, and Python then installs no KeyboardInterrupt
+        # handler in its children: each "terminal" starts with the default disposition, as a shell's
+        # foreground job does.
         proc = subprocess.Popen(
-            argv, cwd=REPO, env=term_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+            argv,
+            cwd=REPO,
+            env=term_env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
         )
         procs.append(proc)
         return proc, _collect(proc)
