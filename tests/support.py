@@ -359,3 +359,37 @@ def live_drc_session(drc: Any) -> int:
     drc.refresh_targets()
     drc.session.handle(ds.LinkUp(now, sid))
     return int(sid)
+
+
+class RecordingOutbox:
+    """An MQTT bridge stand-in that keeps what is published (topic, payload), for tests of the layers
+    above paho that need no broker."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[str, bytes]] = []
+
+    def publish(self, topic: str, payload: bytes, qos: int = 1, retain: bool = False) -> bool:
+        self.sent.append((topic, payload))
+        return True
+
+    def payloads(self) -> list[bytes]:
+        return [p for _, p in self.sent]
+
+
+def drc_controller(devices: Any, outbox: RecordingOutbox, loop: Any, gateway_sn: str = "GW-TEST-1") -> Any:
+    """A DrcController over ``devices`` whose main link is ``outbox`` (not started: no writer thread
+    until the test calls ``start()``; ``live_drc_session`` puts it in a session)."""
+    from gateway.app import build_registry
+    from gateway.drc import DrcController
+    from gateway.metrics import Metrics
+
+    return DrcController(
+        settings=gateway_settings(1, [], gateway_sn=gateway_sn),
+        registry=build_registry(),
+        devices=devices,
+        metrics=Metrics(),
+        loop=loop,
+        main_bridge=outbox,
+        publish_event=lambda *a: None,
+        publish_gateway_osd=lambda d: None,
+    )

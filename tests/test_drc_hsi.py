@@ -6,11 +6,9 @@ from __future__ import annotations
 import asyncio
 import json
 
-from gateway.app import build_registry
 from gateway.devices import DeviceTable
-from gateway.drc import DrcController, around_distances
-from gateway.metrics import Metrics
-from tests.support import FakeAdapter, gateway_settings, live_drc_session
+from gateway.drc import around_distances
+from tests.support import FakeAdapter, RecordingOutbox, drc_controller, live_drc_session
 
 
 def test_four_sectors_fill_360_bins_clockwise_from_the_nose() -> None:
@@ -24,37 +22,19 @@ def test_four_sectors_fill_360_bins_clockwise_from_the_nose() -> None:
     assert around_distances({**readings, "front": (float("nan"), True)})[0] == 0
 
 
-class Up:
-    def __init__(self) -> None:
-        self.sent: list[bytes] = []
-
-    def publish(self, topic: str, payload: bytes, qos: int = 1, retain: bool = False) -> bool:
-        self.sent.append(payload)
-        return True
-
-
 def test_sticks_without_payload_authority_on_a_gimbal_only_gateway_answer_319031() -> None:
     gimbal = FakeAdapter("GIMBAL-1", "39-0-7", {})  # domain 1: a payload, no aircraft here
     devices = DeviceTable([gimbal])
     devices.authority.payloads.add("39-0-7")
     loop = asyncio.new_event_loop()
     try:
-        up = Up()
-        drc = DrcController(
-            settings=gateway_settings(1, [], gateway_sn="GW-HSI"),
-            registry=build_registry(),
-            devices=devices,
-            metrics=Metrics(),
-            loop=loop,
-            main_bridge=up,  # type: ignore[arg-type]
-            publish_event=lambda *a: None,
-            publish_gateway_osd=lambda d: None,
-        )
+        up = RecordingOutbox()
+        drc = drc_controller(devices, up, loop, "GW-HSI")
         sid = live_drc_session(drc)
         devices.authority.payloads.clear()  # the cloud lost payload authority
-        drc.handle_down(b'{"method":"drone_control","data":{"seq":1,"w":10}}', sid, up)  # type: ignore[arg-type]
+        drc.handle_down(b'{"method":"drone_control","data":{"seq":1,"w":10}}', sid, up)
     finally:
         loop.close()
-    reply = json.loads(up.sent[-1])
+    reply = json.loads(up.payloads()[-1])
     assert reply["method"] == "drone_control" and reply["data"]["result"] == 319031
     assert reply["data"]["output"]["seq"] == 1

@@ -17,25 +17,15 @@ from gateway.app import build_registry
 from gateway.clock import SystemClock
 from gateway.devices import DeviceTable
 from gateway.dispatcher import Dispatcher
-from gateway.drc import DrcController
 from gateway.metrics import Metrics
 from gateway.settings import DispatcherSettings
 from schemas import TopicKind, topic
-from tests.support import FakeAdapter, gateway_settings, live_drc_session
+from tests.support import FakeAdapter, RecordingOutbox, drc_controller, live_drc_session
 
 GW = "GW-STOP-1"
 _ABSENT = object()
 SHAPES: list[Any] = [{}, "", None, _ABSENT, 5, [1, 2], "garbage", {"unexpected": True}]
 IDS = ["object", "empty-string", "null", "absent", "number", "list", "string", "extra-field"]
-
-
-class Recorder:
-    def __init__(self) -> None:
-        self.sent: list[tuple[str, bytes]] = []
-
-    def publish(self, topic: str, payload: bytes, qos: int = 1, retain: bool = False) -> bool:
-        self.sent.append((topic, payload))
-        return True
 
 
 class StopCounter(FakeAdapter):
@@ -67,7 +57,7 @@ def _message(method: str, data: Any, **envelope: Any) -> bytes:
 @pytest.mark.parametrize("data", SHAPES, ids=IDS)
 @pytest.mark.parametrize("method", ["fly_to_point_stop", "drc_mode_exit"])
 def test_a_stop_service_in_any_shape_stops_and_is_answered_0(method: str, data: Any) -> None:
-    device, drc, out, metrics = StopCounter(), FakeDrc(), Recorder(), Metrics()
+    device, drc, out, metrics = StopCounter(), FakeDrc(), RecordingOutbox(), Metrics()
     dispatcher = Dispatcher(
         gateway_sn=GW,
         registry=build_registry(),
@@ -87,7 +77,7 @@ def test_a_stop_service_in_any_shape_stops_and_is_answered_0(method: str, data: 
 
 
 def test_a_service_with_parameters_and_empty_string_data_names_the_missing_field() -> None:
-    out = Recorder()
+    out = RecordingOutbox()
     dispatcher = Dispatcher(
         gateway_sn=GW,
         registry=build_registry(),
@@ -113,32 +103,23 @@ class Braked(FakeAdapter):
 
 @pytest.mark.parametrize("data", SHAPES, ids=IDS)
 def test_emergency_stop_in_any_shape_five_times_stops_once_and_answers_each(data: Any) -> None:
-    device, up = Braked(), Recorder()
+    device, up = Braked(), RecordingOutbox()
     devices = DeviceTable([device])
     devices.authority.payloads.add("39-0-7")
     loop = asyncio.new_event_loop()
     try:
-        drc = DrcController(
-            settings=gateway_settings(1, [], gateway_sn=GW),
-            registry=build_registry(),
-            devices=devices,
-            metrics=Metrics(),
-            loop=loop,
-            main_bridge=up,  # type: ignore[arg-type]
-            publish_event=lambda *a: None,
-            publish_gateway_osd=lambda d: None,
-        )
+        drc = drc_controller(devices, up, loop, GW)
         sid = live_drc_session(drc)
         drc.start()
         body = {"method": "drone_emergency_stop"}
         if data is not _ABSENT:
             body["data"] = data
         for _ in range(5):
-            drc.handle_down(json.dumps(body).encode(), sid, up)  # type: ignore[arg-type]
+            drc.handle_down(json.dumps(body).encode(), sid, up)
         assert drc.session.state is ds.State.HOLDING and drc.session.setpoint == ds.ZERO
         drc.writer.stop()  # sends what is pending, then ends
         assert drc.writer.setpoint == ds.ZERO and device.braked == 1
     finally:
         loop.close()
-    replies = [json.loads(p) for _, p in up.sent]
+    replies = [json.loads(p) for p in up.payloads()]
     assert [(r["method"], r["data"]["result"]) for r in replies] == [("drone_emergency_stop", 0)] * 5
