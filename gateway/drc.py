@@ -263,6 +263,8 @@ class DrcController:
         self._opening: dict[int, asyncio.Task[None]] = {}
         self._closing: set[asyncio.Task[None]] = set()
         self._targets: tuple[Adapter, ...] = ()
+        #: an aircraft or robot is here (flight authority governs sticks), else payloads only
+        self._has_movable = any(a.info.domain != "1" for a in devices)
         self._push_task: asyncio.Task[None] | None = None
         self._pending_broker: dict[Any, Any] = {}  # link key -> drc_mode_enter's mqtt_broker, until opened
         self._failure_logged: dict[tuple[str, str], float] = {}
@@ -517,11 +519,11 @@ class DrcController:
 
     # -- authority (the loop) -------------------------------------------------------------------
     def _authority_problem(self) -> tuple[int, dict[str, Any]] | None:
-        movable = [a for a in self.devices if a.info.domain != "1"]
+        """Called for every stick: reads two set sizes, builds nothing (the device table is fixed)."""
         auth = self.devices.authority
-        if movable and not auth.flight:
+        if self._has_movable and not auth.flight:
             return ResultCode.NO_FLIGHT_AUTHORITY, {"reason": "grab flight authority first"}
-        if not movable and not auth.payloads:
+        if not self._has_movable and not auth.payloads:
             return ResultCode.NO_PAYLOAD_AUTHORITY, {"reason": "grab payload authority first"}
         return None
 
@@ -610,8 +612,8 @@ class DrcController:
         assert isinstance(token, _Down)
         request = token.message
         if request is None:  # an emergency stop that could not be parsed, obeyed all the same
-            body = b'{"method":"drone_emergency_stop","data":{"result":%d}}' % action.result
-            token.via.publish(self.up_topic, body, qos=0)
+            reply = self.registry.build(TopicKind.DRC_UP, "drone_emergency_stop", {"result": action.result})
+            token.via.publish(self.up_topic, reply.model_dump_json().encode(), qos=0)
             return
         method = request.method
         if method == "heart_beat":

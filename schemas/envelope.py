@@ -71,7 +71,8 @@ class InboundResult(InboundModel):
 
 
 class EmptyRequest(InboundModel):
-    """No parameters ("Data: null" in the seed; ``{}``, ``null`` and a missing ``data`` are all accepted)."""
+    """No parameters ("Data: null" in the seed; ``{}``, ``null``, ``""`` (DJI's reference cloud) and a
+    missing ``data`` are all accepted)."""
 
 
 class PropertyResult(OutboundModel):
