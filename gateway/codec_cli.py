@@ -115,6 +115,15 @@ def run_encode(ns: argparse.Namespace, stdout: TextIO, stderr: TextIO) -> int:
     return 0
 
 
+def is_assignment(word: str) -> bool:
+    """A ``field=value`` word that argparse left over after an option (``cli.main`` gathers them)."""
+    return "=" in word and not word.startswith("-")
+
+
+def _is_hex_word(word: str) -> bool:
+    return word == "-" or not word.startswith("-")
+
+
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     dec = sub.add_parser(
         "decode",
@@ -124,7 +133,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     dec.add_argument("protocol", choices=FAMILIES)
     dec.add_argument("hex", nargs="*", help="hex bytes; '-' or nothing reads stdin")
     _family_options(dec)
-    dec.set_defaults(handler=lambda ns: run_decode(ns, sys.stdin, sys.stdout))
+    dec.set_defaults(handler=lambda ns: run_decode(ns, sys.stdin, sys.stdout), trailing=("hex", _is_hex_word))
 
     enc = sub.add_parser("encode", help="encode one command as a frame (hex)")
     enc.add_argument("protocol", choices=FAMILIES)
@@ -133,7 +142,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     enc.add_argument("--can", action="store_true", help="rsdk: print the CAN split as ID#DATA lines")
     enc.add_argument("fields", nargs="*", help="field=value (JSON values; hex strings for bytes)")
     _family_options(enc)
-    enc.set_defaults(handler=lambda ns: run_encode(ns, sys.stdout, sys.stderr), accepts_fields=True)
+    enc.set_defaults(
+        handler=lambda ns: run_encode(ns, sys.stdout, sys.stderr), trailing=("fields", is_assignment)
+    )
 
 
 def _family_options(p: argparse.ArgumentParser) -> None:

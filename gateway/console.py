@@ -29,6 +29,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from gateway.codec_cli import is_assignment
 from gateway.mqtt import close_client
 
 if TYPE_CHECKING:
@@ -67,10 +68,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     send = sub.add_parser(
         "send",
         help="publish one Cloud API service and print its reply",
-        description="Publish one service to thing/product/SN/services, wait for the services_reply with the "
-        "same tid and bid, print it. Exit 0 on result 0, 1 on an error result, 3 on timeout.",
+        description="Check the method and every field against the contract (dji-gateway methods METHOD lists "
+        "them), publish one service to thing/product/SN/services, wait for the services_reply with the same "
+        "tid and bid, print it. Exit 0 on result 0, 1 on an error result (its reason on stderr), 2 when "
+        "nothing was sent (a bad method or field, or the broker unusable), 3 when no reply came in time "
+        "(the gateway serial numbers seen on the broker on stderr).",
     )
-    send.add_argument("method", help="Cloud API method, e.g. camera_aim")
+    send.add_argument("method", help="Cloud API method, e.g. camera_aim (dji-gateway methods lists them)")
     send.add_argument(
         "fields",
         nargs="*",
@@ -85,9 +89,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "the drc/up answer with the same method and seq",
     )
     send.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the reply (10)")
+    send.add_argument(
+        "--no-check",
+        action="store_true",
+        help="publish without checking the method and fields against the contract (values JSON when "
+        "they parse): to see how a gateway answers a bad request",
+    )
     send.add_argument("--tid", help="the request's tid (default: a fresh UUID)")
     _connection_args(send)
-    send.set_defaults(handler=cmd_send, accepts_fields=True)
+    send.set_defaults(handler=cmd_send, trailing=("fields", is_assignment))
 
     mon = sub.add_parser(
         "monitor",
@@ -159,16 +169,6 @@ def build_message(method: str, data: dict[str, Any], *, tid: str | None = None) 
         "method": method,
         "data": data,
     }
-
-
-def _data_from(ns: argparse.Namespace) -> dict[str, Any]:
-    data: dict[str, Any] = {}
-    if ns.data:
-        loaded = json.loads(ns.data)
-        if not isinstance(loaded, dict):
-            raise ValueError("--data must be a JSON object")
-        data = loaded
-    return _merge(data, parse_fields(list(ns.fields or [])))
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -260,14 +260,73 @@ class _Link:
 
 
 # ------------------------------------------------------------------------------------------ send
+def _checked_data(ns: argparse.Namespace) -> dict[str, Any] | None:
+    """The request's ``data``, typed and checked against the contract (None: refused, and said why on
+    stderr). ``--no-check`` sends what was typed, JSON where it parses (to try a gateway's own checks).
+    Raises ValueError for words that are not ``field=value`` or a ``--data`` that is not an object."""
+    base: dict[str, Any] = {}
+    if ns.data:
+        loaded = json.loads(ns.data)
+        if not isinstance(loaded, dict):
+            raise ValueError("--data must be a JSON object")
+        base = loaded
+    if ns.no_check:
+        return _merge(base, parse_fields(list(ns.fields or [])))
+    from gateway.contract_cli import check_request
+
+    check = check_request(ns.method, list(ns.fields or []), base, drc=ns.drc)
+    if check.ok:
+        return check.data
+    print(f"dji-gateway send: {ns.method} not sent:", file=sys.stderr)
+    for problem in check.problems:
+        print(f"  {problem}", file=sys.stderr)
+    if check.hint:
+        print(f"  ({check.hint})", file=sys.stderr)
+    return None
+
+
+class GatewaysSeen:
+    """The gateway serial numbers heard on the broker (their osd and status), so a wrong
+    ``--gateway-sn`` can be answered with the right ones."""
+
+    TOPICS = ("thing/product/+/osd", "sys/product/+/status")
+
+    def __init__(self) -> None:
+        self.serials: set[str] = set()
+
+    def feed(self, topic: str, payload: bytes) -> None:
+        parts = topic.split("/")
+        if len(parts) != 4 or parts[3] not in ("osd", "status"):
+            return
+        if parts[0] == "sys":
+            self.serials.add(parts[2])
+            return
+        try:
+            body = json.loads(payload)
+        except ValueError:
+            return
+        if isinstance(body, dict) and isinstance(body.get("gateway"), str):
+            self.serials.add(body["gateway"])
+
+    def advice(self, wanted: str) -> str:
+        """One sentence: which gateways are there, or that none is."""
+        if wanted in self.serials:
+            return f"gateway {wanted} is on this broker but did not answer (is the method slow? --timeout)"
+        if not self.serials:
+            return "no gateway published on this broker meanwhile (is one running and connected to it?)"
+        return "gateways seen on this broker: " + ", ".join(sorted(self.serials))
+
+
 def cmd_send(ns: argparse.Namespace) -> int:
     if not ns.gateway_sn:
         print(f"dji-gateway send: --gateway-sn is required (or set ${GATEWAY_ENV})", file=sys.stderr)
         return EXIT_USAGE
     try:
-        data = _data_from(ns)
+        data = _checked_data(ns)
     except ValueError as exc:
         print(f"dji-gateway send: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if data is None:
         return EXIT_USAGE
     gw = ns.gateway_sn
     if ns.drc:
@@ -291,8 +350,12 @@ def cmd_send(ns: argparse.Namespace) -> int:
 
     found: list[dict[str, Any]] = []
     arrived = threading.Event()
+    seen = GatewaysSeen()
 
     def on_message(topic: str, payload: bytes) -> None:
+        if topic != reply_topic:
+            seen.feed(topic, payload)
+            return
         try:
             reply = json.loads(payload)
         except ValueError:
@@ -302,7 +365,7 @@ def cmd_send(ns: argparse.Namespace) -> int:
             arrived.set()
 
     try:
-        link = _Link(ns, on_message).open([reply_topic])
+        link = _Link(ns, on_message).open([reply_topic, *GatewaysSeen.TOPICS])
     except BrokerError as exc:
         print(f"dji-gateway send: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -310,8 +373,8 @@ def cmd_send(ns: argparse.Namespace) -> int:
         link.publish(request_topic, body, qos=0 if ns.drc else 1)
         if not arrived.wait(ns.timeout):
             print(
-                f"dji-gateway send: no reply to {ns.method} from {gw} within {ns.timeout:g}s "
-                "(is the gateway running and connected to this broker?)",
+                f"dji-gateway send: no reply to {ns.method} from {gw} within {ns.timeout:g}s; "
+                + seen.advice(gw),
                 file=sys.stderr,
             )
             return EXIT_TIMEOUT
@@ -319,11 +382,17 @@ def cmd_send(ns: argparse.Namespace) -> int:
         link.close()
     reply = found[0]
     print(json.dumps(reply, indent=2, ensure_ascii=False))
-    result = (reply.get("data") or {}).get("result", 0)
+    rdata = reply.get("data") or {}
+    result = rdata.get("result", 0)
     if result:
         from schemas.results import meaning
 
-        print(f"dji-gateway send: {ns.method} failed with {result}: {meaning(int(result))}", file=sys.stderr)
+        reason = (rdata.get("output") or {}).get("reason") if isinstance(rdata.get("output"), dict) else None
+        print(
+            f"dji-gateway send: {ns.method} failed with {result} ({meaning(int(result)).rstrip('.')})"
+            + (f": {reason}" if reason else ""),
+            file=sys.stderr,
+        )
         return EXIT_ERROR_RESULT
     return EXIT_OK
 

@@ -176,13 +176,15 @@ def test_send_prints_the_matching_reply_and_maps_the_result_to_the_exit_code(
     assert code == 1 and json.loads(out)["data"]["result"] == 325001 and "325001" in err
     # nobody answers for this gateway: exit 3 after the timeout
     code = main(
-        ["send", "camera_photo_take", "--gateway-sn", "GW-NOBODY", "--broker", url, "--timeout", "0.3"]
-    )
+        ["send", "camera_photo_take", f"payload_index={PI}", "--gateway-sn", "GW-NOBODY", "--broker", url,
+         "--timeout", "0.3"]
+    )  # fmt: skip
     assert code == 3 and "no reply" in capsys.readouterr().err
     # no broker there: exit 2
     code = main(
-        ["send", "camera_photo_take", "--gateway-sn", GW, "--broker", f"mqtt://127.0.0.1:{free_port()}"]
-    )
+        ["send", "camera_photo_take", f"payload_index={PI}", "--gateway-sn", GW, "--broker",
+         f"mqtt://127.0.0.1:{free_port()}"]
+    )  # fmt: skip
     assert code == 2 and "cannot reach the broker" in capsys.readouterr().err
     assert main(["send", "x", "--broker", url]) == 2  # no --gateway-sn
 
