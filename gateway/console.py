@@ -108,10 +108,29 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     mon.add_argument("--plain", action="store_true", help="one line per message, even on a terminal")
     mon.add_argument("--once", action="store_true", help="listen for --duration, draw the view once, exit")
     mon.add_argument("--duration", type=float, help="stop after this many seconds (--once: default 3)")
-    mon.add_argument(
+    replies = mon.add_mutually_exclusive_group()
+    replies.add_argument(
         "--reply-events",
-        action="store_true",
-        help="answer events that ask for an events_reply (act as the cloud: no re-sends)",
+        dest="reply_events",
+        action="store_const",
+        const="always",
+        default="auto",
+        help="answer every event that asks for an events_reply at once (act as the cloud). Default: "
+        f"answer one only when no other cloud has within {AUTO_REPLY_GRACE:g}s (the monitor is the only "
+        "cloud), so the gateway does not re-send it",
+    )
+    replies.add_argument(
+        "--no-reply-events",
+        dest="reply_events",
+        action="store_const",
+        const="never",
+        help="never answer events (another cloud does; unanswered ones are re-sent, shown once)",
+    )
+    mon.add_argument(
+        "--status-url",
+        default=None,
+        help="the gateway's HTTP endpoint, asked once for the topology when the monitor starts after the "
+        "gateway's update_topo (default http://127.0.0.1:$DJIGW_METRICS__PORT, 9108; '' turns it off)",
     )
     mon.add_argument("--verbose", "-v", action="store_true", help="plain mode: also the DRC pushes")
     _connection_args(mon)
@@ -431,22 +450,27 @@ class DrcView:
 class MonitorState:
     """What one gateway has said so far; :meth:`feed` returns the plain-mode lines for a message."""
 
-    def __init__(self, gateway_sn: str, *, verbose: bool = False, history: int = 12) -> None:
+    def __init__(self, gateway_sn: str, *, verbose: bool = False, history: int = 200) -> None:
         self.gateway_sn = gateway_sn
         self.verbose = verbose
         self.devices: dict[str, DeviceView] = {}
         self.gateway_online: bool | None = None
         self.topology_at: float | None = None
+        self.topology_source = ""  # "" (update_topo on the broker) or "/status" (asked the gateway)
         self.events: deque[tuple[float, str]] = deque(maxlen=history)
         self.drc = DrcView()
         self.messages = 0
         self.last_at: float | None = None
+        self.resent = 0  # event copies the gateway re-sent (shown once, counted here)
+        self._event_tids: dict[str, bool] = {}  # tid → needs a reply; bounded, oldest forgotten
+        self.answered: set[str] = set()  # event tids some cloud answered on events_reply
 
     def topics(self) -> list[str]:
         gw = self.gateway_sn
         return [
             f"sys/product/{gw}/status",
             f"thing/product/{gw}/events",
+            f"thing/product/{gw}/events_reply",
             f"thing/product/{gw}/services",
             f"thing/product/{gw}/services_reply",
             f"thing/product/{gw}/drc/up",
@@ -475,6 +499,26 @@ class MonitorState:
         handler = getattr(self, "_" + kind.replace("/", "_"), None)
         return handler(sn, body, data, now) if handler is not None else []
 
+    def learn_status(self, doc: dict[str, Any], now: float) -> list[str]:
+        """The topology from the gateway's ``/status`` (a monitor started after the gateway's last
+        ``update_topo``); ignored when it is another gateway's, or an ``update_topo`` came first."""
+        if doc.get("gateway_sn") != self.gateway_sn or self.topology_at is not None:
+            return []
+        self.topology_at, self.topology_source, self.gateway_online = now, "/status", True
+        online = []
+        for d in doc.get("devices") or []:
+            sn = str(d.get("sn"))
+            view = self.devices.setdefault(sn, DeviceView(sn))
+            view.domain, view.online = str(d.get("domain", "?")), bool(d.get("online"))
+            if view.online:
+                online.append(f"{sn}(domain {view.domain})")
+        names = " ".join(online) or "no devices online"
+        return [f"{_clock()} topo   {self.gateway_sn}: {names} (from the gateway's /status)"]
+
+    def wants_answer(self, tid: str) -> bool:
+        """An event with ``need_reply`` that nobody has answered yet (the monitor's auto reply)."""
+        return bool(self._event_tids.get(tid)) and tid not in self.answered
+
     def _ours(self, sn: str, body: dict[str, Any]) -> bool:
         return sn == self.gateway_sn or sn in self.devices or body.get("gateway") == self.gateway_sn
 
@@ -483,7 +527,7 @@ class MonitorState:
         if body.get("method") != "update_topo":
             return []
         subs = data.get("sub_devices") or []
-        self.topology_at = now
+        self.topology_at, self.topology_source = now, ""
         self.gateway_online = True
         listed = {d.get("sn") for d in subs}
         for view in self.devices.values():
@@ -496,6 +540,7 @@ class MonitorState:
 
     def _osd(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
         if sn == self.gateway_sn:
+            before = (self.drc.failsafe, self.drc.failsafe_reason)
             if "drc_state" in data:
                 self.drc.state = int(data["drc_state"])
             failsafe = data.get("x_drc_failsafe")
@@ -507,7 +552,8 @@ class MonitorState:
                     since = failsafe.get("since")
                     at = now - max(0.0, time.time() - since / 1000) if isinstance(since, int | float) else now
                     self._failsafe(_FAILSAFE_TEXT.get(reason, reason), at, reason)
-            return [f"{_clock()} osd    {sn} drc_state={data.get('drc_state')}"] if self.verbose else []
+            shown = [f"{_clock()} osd    {sn} drc_state={data.get('drc_state')}"] if self.verbose else []
+            return [*shown, *self._failsafe_change(before, now)]
         view = self.devices.setdefault(sn, DeviceView(sn))
         view.osd.update(data)
         view.osd_at, view.osd_count = now, view.osd_count + 1
@@ -520,9 +566,26 @@ class MonitorState:
         view.state_at = now
         return [f"{_clock()} state  {sn} {_compact(data)}"]
 
+    def _events_reply(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
+        tid = body.get("tid")
+        if isinstance(tid, str):
+            self.answered.add(tid)
+            while len(self.answered) > 1024:
+                self.answered.pop()
+        return []
+
     def _events(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
         method = str(body.get("method"))
+        tid = body.get("tid")
+        if isinstance(tid, str):
+            if tid in self._event_tids:  # the gateway re-sent it (nobody answered yet): shown once
+                self.resent += 1
+                return []
+            self._event_tids[tid] = body.get("need_reply") == 1
+            while len(self._event_tids) > 1024:
+                self._event_tids.pop(next(iter(self._event_tids)))
         text = f"{method} {_compact(data)}"
+        before = (self.drc.failsafe, self.drc.failsafe_reason)
         if method == "drc_status_notify":
             self.drc.state = int(data.get("drc_state", self.drc.state))
             result = int(data.get("result", 0) or 0)
@@ -535,7 +598,17 @@ class MonitorState:
         elif method == "joystick_invalid_notify":
             self._failsafe(f"joystick invalid (reason {data.get('reason')})", now, "authority")
         self.events.append((now, f"event {text}"))
-        return [f"{_clock()} event  {text}"]
+        return [f"{_clock()} event  {text}", *self._failsafe_change(before, now)]
+
+    def _failsafe_change(self, before: tuple[str | None, str | None], now: float) -> list[str]:
+        """A line (and an entry in the event list) when the failsafe that holds changes: failsafes are
+        shown as they happen, not only in the DRC panel."""
+        drc = self.drc
+        if (drc.failsafe, drc.failsafe_reason) == before or drc.failsafe == before[0]:
+            return []
+        text = f"FAILSAFE {drc.failsafe}" if drc.failsafe is not None else f"failsafe cleared ({before[0]})"
+        self.events.append((now, text))
+        return [f"{_clock()} drc    {text}"]
 
     def _services(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
         text = f"{body.get('method')} {_compact(data)}"
@@ -566,8 +639,9 @@ class MonitorState:
             drc.stick, drc.stick_at = dict(data), now
             return [f"{_clock()} drc    sticks {_compact(data)}"]
         if method == "drone_emergency_stop":
+            before = (drc.failsafe, drc.failsafe_reason)
             self._failsafe(_FAILSAFE_TEXT["emergency_stop"], now, "emergency_stop")
-            return [f"{_clock()} drc    EMERGENCY STOP"]
+            return [f"{_clock()} drc    EMERGENCY STOP", *self._failsafe_change(before, now)]
         return []
 
     def _drc_up(self, sn: str, body: dict[str, Any], data: dict[str, Any], now: float) -> list[str]:
@@ -629,10 +703,20 @@ def osd_summary(data: dict[str, Any], limit: int = 8) -> str:
             continue
         if isinstance(value, list):
             continue
-        shown.append(f"{key}={_num(value)}")
+        shown.append(f"{key}={_num(value)}" + (_mode_label(value) if key == "mode_code" else ""))
         if len(shown) >= limit:
             break
     return " ".join(shown)
+
+
+def _mode_label(code: Any) -> str:
+    """``mode_code`` in words, as the contract names it: ``(wayline)``, ``(manual)`` …"""
+    from schemas.osd import ModeCode
+
+    try:
+        return f"({ModeCode(int(code)).name.replace('_', ' ').lower()})"
+    except (TypeError, ValueError):
+        return ""
 
 
 def _num(value: Any) -> str:
@@ -663,8 +747,9 @@ def _age(now: float, then: float | None) -> str:
     return "—" if then is None else f"{max(0.0, now - then):.1f}s"
 
 
-def render(state: MonitorState, now: float, broker: str = "") -> RenderableType:
-    """The live view: devices (online, osd), the DRC session, the latest events and replies."""
+def render(state: MonitorState, now: float, broker: str = "", height: int | None = None) -> RenderableType:
+    """The live view: devices (online, osd), the DRC session, the latest events and replies (as many as
+    fit in ``height`` rows, when given; 12 otherwise)."""
     from rich.console import Group
     from rich.panel import Panel
     from rich.table import Table
@@ -672,9 +757,15 @@ def render(state: MonitorState, now: float, broker: str = "") -> RenderableType:
     gw = state.gateway_sn
     title = f"dji-gateway monitor · gateway {gw}" + (f" · {broker}" if broker else "")
     if state.topology_at is not None:
-        head = f"topology {_age(now, state.topology_at)} ago · messages {state.messages}"
+        where = " (from the gateway's /status)" if state.topology_source else ""
+        head = f"topology {_age(now, state.topology_at)} ago{where} · messages {state.messages}"
+        if state.resent:
+            head += f" · {state.resent} event re-sends (unanswered events)"
     elif state.messages:
-        head = f"messages {state.messages} · no update_topo yet (sent on connect and when devices come or go)"
+        head = (
+            f"messages {state.messages} · no update_topo yet (sent on connect and when devices come or go; "
+            "--status-url lets the monitor ask the gateway)"
+        )
     else:
         head = "waiting for the gateway (is it running and connected to this broker?)"
     devices = Table(title="devices", expand=True, title_justify="left")
@@ -711,8 +802,12 @@ def render(state: MonitorState, now: float, broker: str = "") -> RenderableType:
         drc_table.add_row("osd_info_push", osd_summary(drc.push, limit=8))
     events = Table(title="events and replies", expand=True, title_justify="left", show_header=False)
     events.add_column("age", width=7, no_wrap=True)
-    events.add_column("what", overflow="fold", ratio=1)
-    for at, text in list(state.events)[::-1]:
+    events.add_column("what", overflow="ellipsis", no_wrap=True, ratio=1)
+    # the rows left once the rest is drawn: frame 2 + head 1 + devices (title, rule, header, bottom) +
+    # the DRC panel (frame 2 + its rows) + the events title
+    used = 2 + 1 + (4 + len(state.devices)) + (2 + drc_table.row_count) + 1 + 2
+    rows = 12 if height is None else max(3, height - used)
+    for at, text in list(state.events)[::-1][:rows]:
         events.add_row(_age(now, at), text)
     return Panel(
         Group(head, devices, Panel(drc_table, title="live control (DRC)", title_align="left"), events),
@@ -722,6 +817,73 @@ def render(state: MonitorState, now: float, broker: str = "") -> RenderableType:
 
 
 # ------------------------------------------------------------------------------------------ monitor
+#: How long the monitor waits for another cloud to answer an event before it answers it itself
+#: (``--reply-events auto``); the gateway re-sends after ``dispatcher.event_retry_interval`` (3 s).
+AUTO_REPLY_GRACE = 1.0
+
+
+class EventAnswerer:
+    """Answers events that carry ``need_reply`` as a cloud would (an ``events_reply`` with result 0), so
+    the gateway stops re-sending them. ``always`` answers at once; ``auto`` only when no other cloud
+    has answered within :data:`AUTO_REPLY_GRACE` (the monitor is then the only cloud); ``never`` not."""
+
+    def __init__(self, link: _Link, state: MonitorState, lock: threading.Lock, mode: str) -> None:
+        self.link, self.state, self.lock, self.mode = link, state, lock, mode
+        self.sent = 0
+
+    def event(self, payload: bytes) -> None:
+        if self.mode == "never":
+            return
+        try:
+            body = json.loads(payload)
+        except ValueError:
+            return
+        if not isinstance(body, dict) or body.get("need_reply") != 1 or not isinstance(body.get("tid"), str):
+            return
+        if self.mode == "always":
+            self._answer(body)
+            return
+        timer = threading.Timer(AUTO_REPLY_GRACE, self._answer, args=(body,))
+        timer.daemon = True
+        timer.start()
+
+    def _answer(self, body: dict[str, Any]) -> None:
+        tid = body["tid"]
+        with self.lock:
+            if not self.state.wants_answer(tid):
+                return
+            self.state.answered.add(tid)
+        reply = {
+            "tid": tid,
+            "bid": body.get("bid"),
+            "timestamp": int(time.time() * 1000),
+            "method": body.get("method"),
+            "data": {"result": 0},
+        }
+        # from paho's thread (always) or a timer: publish without waiting for the broker's PUBACK
+        topic = f"thing/product/{self.state.gateway_sn}/events_reply"
+        self.link.client.publish(topic, json.dumps(reply), qos=1)
+        self.sent += 1
+
+
+def _ask_status(url: str, state: MonitorState, lock: threading.Lock, plain: bool) -> None:
+    """Learn the topology from the gateway's ``/status`` (its ``update_topo`` went out before this
+    monitor subscribed). Nobody there, or another gateway: nothing learnt, nothing said."""
+    from gateway.status_cli import fetch
+
+    try:
+        code, doc = fetch(url, "/status", 2.0)
+    except (OSError, ValueError):
+        return
+    if code != 200 and "gateway_sn" not in doc:
+        return
+    with lock:
+        lines = state.learn_status(doc, time.monotonic())
+    if plain:
+        for line in lines:
+            print(line, flush=True)
+
+
 def cmd_monitor(ns: argparse.Namespace) -> int:
     if not ns.gateway_sn:
         print(f"dji-gateway monitor: --gateway-sn is required (or set ${GATEWAY_ENV})", file=sys.stderr)
@@ -729,7 +891,7 @@ def cmd_monitor(ns: argparse.Namespace) -> int:
     state = MonitorState(ns.gateway_sn, verbose=ns.verbose)
     plain = ns.plain or (not ns.once and not sys.stdout.isatty())
     lock = threading.Lock()
-    link_box: list[_Link] = []
+    answerer: list[EventAnswerer] = []
 
     def on_message(topic: str, payload: bytes) -> None:
         with lock:
@@ -737,16 +899,23 @@ def cmd_monitor(ns: argparse.Namespace) -> int:
         if plain:
             for line in lines:
                 print(line, flush=True)
-        if ns.reply_events and topic.endswith("/events") and link_box:
-            _answer_event(link_box[0], ns.gateway_sn, payload)
+        if topic.endswith("/events") and answerer:
+            answerer[0].event(payload)
 
     try:
         link = _Link(ns, on_message)
-        link_box.append(link)
+        answerer.append(EventAnswerer(link, state, lock, ns.reply_events))
         link.open(state.topics())
     except BrokerError as exc:
         print(f"dji-gateway monitor: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    if plain:
+        print(f"monitoring gateway {ns.gateway_sn} on {ns.broker} (Ctrl-C stops)", flush=True)
+    from gateway.status_cli import default_url
+
+    status_url = default_url() if ns.status_url is None else ns.status_url
+    if status_url:
+        threading.Thread(target=_ask_status, args=(status_url, state, lock, plain), daemon=True).start()
     duration = ns.duration if ns.duration is not None else (3.0 if ns.once else None)
     deadline = None if duration is None else time.monotonic() + duration
     try:
@@ -758,39 +927,26 @@ def cmd_monitor(ns: argparse.Namespace) -> int:
                 Console(width=max(100, _terminal_width())).print(render(state, time.monotonic(), ns.broker))
             return EXIT_OK if state.messages else EXIT_ERROR_RESULT
         if plain:
-            print(f"monitoring gateway {ns.gateway_sn} on {ns.broker} (Ctrl-C stops)", flush=True)
             _sleep_until(deadline)
             return EXIT_OK
+        from rich.console import Console
         from rich.live import Live
 
-        with Live(render(state, time.monotonic(), ns.broker), refresh_per_second=4, screen=False) as live:
+        console = Console()
+
+        def view() -> RenderableType:
+            with lock:
+                return render(state, time.monotonic(), ns.broker, height=console.size.height)
+
+        with Live(view(), console=console, refresh_per_second=4, screen=False) as live:
             while deadline is None or time.monotonic() < deadline:
                 time.sleep(0.25)
-                with lock:
-                    live.update(render(state, time.monotonic(), ns.broker))
+                live.update(view())
         return EXIT_OK
     except KeyboardInterrupt:
         return EXIT_OK
     finally:
         link.close()
-
-
-def _answer_event(link: _Link, gateway_sn: str, payload: bytes) -> None:
-    try:
-        body = json.loads(payload)
-    except ValueError:
-        return
-    if not isinstance(body, dict) or body.get("need_reply") != 1:
-        return
-    reply = {
-        "tid": body.get("tid"),
-        "bid": body.get("bid"),
-        "timestamp": int(time.time() * 1000),
-        "method": body.get("method"),
-        "data": {"result": 0},
-    }
-    # from paho's thread: publish without waiting (waiting here would block the network loop)
-    link.client.publish(f"thing/product/{gateway_sn}/events_reply", json.dumps(reply), qos=1)
 
 
 def _sleep_until(deadline: float | None) -> None:

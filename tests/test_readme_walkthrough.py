@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import threading
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -24,58 +25,129 @@ from tests.support import wait_until
 
 REPO = Path(__file__).resolve().parents[1]
 README = (REPO / "README.md").read_text()
+COMMAND_LANGS = frozenset({"sh", "bash", "shell"})
+SKIP = re.compile(r"<!--\s*readme-test:\s*skip\s*\((.+)\)\s*-->")
 
 
-def walkthrough() -> dict[int, list[str]]:
-    """The commands of the README's walkthrough block, per terminal, continuations joined."""
-    block = README.split("<!-- walkthrough:begin", 1)[1].split("<!-- walkthrough:end -->", 1)[0]
-    body = block.split("```sh\n", 1)[1].split("```", 1)[0]
-    terminals: dict[int, list[str]] = {}
-    current = 0
-    for line in body.replace("\\\n", " ").splitlines():
-        line = line.strip()
-        if m := re.match(r"#\s*terminal (\d+)", line):
-            current = int(m.group(1))
+@dataclass(frozen=True)
+class Block:
+    line: int  # 1-based line of the opening fence
+    lang: str
+    body: str
+    skip: str | None  # the reason, when opted out
+
+    def terminals(self) -> list[tuple[int | None, str]]:
+        """(terminal, command) in order; continuations joined, comments dropped; None: no terminal named."""
+        out: list[tuple[int | None, str]] = []
+        current: int | None = None
+        for raw in self.body.replace("\\\n", " ").splitlines():
+            line = raw.strip()
+            if m := re.match(r"#\s*terminal (\d+)", line):
+                current = int(m.group(1))
+                continue
+            line = re.sub(r"\s+#.*$", "", line)
+            if line and not line.startswith("#"):
+                out.append((current, line))
+        return out
+
+
+def blocks(markdown: str = README) -> list[Block]:
+    """Every fenced block of ``markdown`` with its label and opt-out."""
+    found: list[Block] = []
+    lines = markdown.splitlines()
+    i = 0
+    while i < len(lines):
+        fence = re.match(r"^(```+)(\S*)\s*$", lines[i])
+        if fence is None:
+            i += 1
             continue
-        line = re.sub(r"\s+#.*$", "", line)
-        if line and not line.startswith("#"):
-            terminals.setdefault(current, []).append(line)
-    return terminals
+        end = next(j for j in range(i + 1, len(lines)) if lines[j].startswith(fence.group(1)))
+        skip = SKIP.search(lines[i - 1]) if i else None
+        found.append(
+            Block(i + 1, fence.group(2), "\n".join(lines[i + 1 : end]) + "\n", skip and skip.group(1))
+        )
+        i = end + 1
+    return found
 
 
-def test_the_walkthrough_block_is_what_the_test_runs() -> None:
-    terminals = walkthrough()
-    assert terminals[1] == ["make run"]
-    assert terminals[2][-1].startswith("dji-gateway monitor ")
-    assert all(c.startswith(("dji-gateway send ", ". .venv/bin/activate")) for c in terminals[3])
+def command_blocks() -> list[Block]:
+    return [b for b in blocks() if b.lang in COMMAND_LANGS]
+
+
+def test_every_fence_is_labelled_and_every_opt_out_says_why() -> None:
+    fences = blocks()
+    unlabelled = [b.line for b in fences if not b.lang]
+    assert not unlabelled, (
+        f"README fences without a label at lines {unlabelled}: sh (run here) or text/toml/…"
+    )
+    assert all(b.skip is None or b.skip.strip() for b in fences)
+    marks = README.count("readme-test:")
+    documented = README.count("`<!-- readme-test: skip (why) -->`")  # the README explains the marker once
+    assert marks - documented == sum(1 for b in fences if b.skip), "a readme-test marker not before a fence"
+    # the walkthrough is there and what the rest of this file expects of it
+    runs = [b for b in command_blocks() if b.skip is None]
+    walk = next(b for b in runs if any(t == 1 for t, _ in b.terminals()))
+    cmds = walk.terminals()
+    assert cmds[0] == (1, "make run")
+    assert any(t == 2 and c.startswith("dji-gateway monitor ") for t, c in cmds)
     # `make run` is this recipe: the test runs it without make (which could reinstall the venv)
     recipe = re.search(r"^run:.*\n\t(.+)$", (REPO / "Makefile").read_text(), re.M)
     assert recipe is not None and recipe.group(1).strip() == "$(PY) -m gateway.devrun $(ARGS)"
 
 
+def test_the_block_parser_finds_labels_terminals_and_opt_outs() -> None:
+    text = (
+        "x\n```sh\n# terminal 1: a\nmake run\n# terminal 2\nls -l \\\n  /tmp   # list\n```\n"
+        "<!-- readme-test: skip (needs can0) -->\n```sh\ncandump can0\n```\n```toml\na = 1\n```\n"
+    )
+    a, b, c = blocks(text)
+    assert (a.line, a.lang, a.skip) == (2, "sh", None)
+    assert a.terminals() == [(1, "make run"), (2, "ls -l    /tmp")]
+    assert (b.skip, b.terminals()) == ("needs can0", [(None, "candump can0")])
+    assert c.lang == "toml"
+
+
+def _is_service(command: str) -> bool:
+    words = shlex.split(command)
+    if words[:2] == ["make", "run"] or words[:2] == ["dji-gateway", "run"]:
+        return True
+    return words[:2] == ["dji-gateway", "monitor"] and not {"--once", "--duration"} & set(words)
+
+
+#: what a service prints once it is ready for the next command
+READY = {"make run": "running with 3 device(s)", "dji-gateway monitor": "monitoring gateway"}
+
+
 class Terminal:
-    """One shell of the walkthrough: runs README lines with the venv activated as the README says."""
+    """One shell of the reader: runs README lines with bash, with what earlier lines set up."""
 
-    def __init__(self, env: dict[str, str]) -> None:
+    def __init__(self, env: dict[str, str], port: int) -> None:
         self.env = env
-        self.activated = False
+        self.port = port
+        self.setup: list[str] = []
 
-    def argv(self, command: str) -> list[str]:
-        if command == "make run":
-            return [sys.executable, "-m", "gateway.devrun"]
-        words = shlex.split(command)
-        assert words[0] == "dji-gateway", command
-        assert self.activated, "the README uses dji-gateway before activating the venv"
-        return [str(Path(sys.executable).parent / "dji-gateway"), *words[1:]]
+    def script(self, command: str) -> str:
+        if command == "make run":  # the Makefile's recipe (checked above), without make
+            command = f"exec {shlex.quote(sys.executable)} -m gateway.devrun"
+        elif _is_service(command):
+            command = "exec " + command
+        command = command.replace("127.0.0.1:1883", f"127.0.0.1:{self.port}")
+        return "\n".join(["set -eo pipefail", *self.setup, command])
 
-    def line(self, command: str) -> list[str] | None:
+    def take(self, command: str) -> bool:
+        """Keep a line that sets the shell up (True), or say it is a command to run (False)."""
         if command == ". .venv/bin/activate":
-            # what activation does for the next lines: the venv's bin first on PATH; the venv running
-            # these tests is the one `make run` creates (.venv) in CI and for `make test`
-            self.activated = True
-            self.env = {**self.env, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{self.env['PATH']}"}
-            return None
-        return self.argv(command)
+            venv = Path(sys.executable).parent.parent
+            if venv != REPO / ".venv":  # tests run from another venv: what activation does, for that one
+                command = (
+                    f"export VIRTUAL_ENV={shlex.quote(str(venv))} PATH={shlex.quote(str(venv / 'bin'))}:$PATH"
+                )
+            self.setup.append(command)
+            return True
+        if command.split()[0] in ("export", "cd", "source", "."):
+            self.setup.append(command)
+            return True
+        return False
 
 
 def _collect(proc: subprocess.Popen[str]) -> list[str]:
@@ -91,95 +163,122 @@ def _collect(proc: subprocess.Popen[str]) -> list[str]:
 
 
 @pytest.mark.broker
-def test_the_walkthrough_moves_the_gimbal_and_flies_the_drone() -> None:
+@pytest.mark.slow
+def test_every_readme_command_block_runs_as_a_reader_would() -> None:
     find_mosquitto()  # `make run` starts it
-    terminals = walkthrough()
-    port = free_port()
-    # the port substitution: `make run` takes PORT, the console takes DJIGW_CONSOLE_BROKER; metrics on
-    # any free port so a gateway already on this machine (9108) is not disturbed
+    port, metrics_port = free_port(), free_port()
+    # the port substitution: `make run` takes PORT, the console DJIGW_CONSOLE_BROKER; metrics on a free port
+    # (a gateway already on this machine keeps 9108), which the monitor and `status` find in the same variable
     env = {k: v for k, v in os.environ.items() if not k.startswith("DJIGW_")}
     env.update(
         PORT=str(port),
         DJIGW_CONSOLE_BROKER=f"mqtt://127.0.0.1:{port}",
-        DJIGW_METRICS__PORT="0",
+        DJIGW_METRICS__PORT=str(metrics_port),
         PYTHONUNBUFFERED="1",
     )
-    procs: list[subprocess.Popen[str]] = []
+    services: dict[str, tuple[subprocess.Popen[str], list[str]]] = {}
+    terminals: dict[int | None, Terminal] = {}
+    ran: list[tuple[str, subprocess.CompletedProcess[str]]] = []
 
-    def start(argv: list[str], term_env: dict[str, str]) -> tuple[subprocess.Popen[str], list[str]]:
+    def start(name: str, script: str) -> None:
         # A terminal delivers Ctrl-C. A test run started in the background by a non-interactive shell
         # (`make test &`) inherits SIGINT *ignored*, and Python then installs no KeyboardInterrupt
         # handler in its children: each "terminal" starts with the default disposition, as a shell's
         # foreground job does.
         proc = subprocess.Popen(
-            argv,
+            ["bash", "-c", script],
             cwd=REPO,
-            env=term_env,
+            env=env,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
         )
-        procs.append(proc)
-        return proc, _collect(proc)
+        services[name] = (proc, _collect(proc))
+        ready = next((text for prefix, text in READY.items() if name.startswith(prefix)), None)
+        if ready is not None:
+            out = services[name][1]
+            wait_until(lambda: any(ready in ln for ln in out), 20, what=f"{name!r} ready")
 
     try:
-        # terminal 1: make run
-        t1 = Terminal(env)
-        (server_argv,) = [a for c in terminals[1] if (a := t1.line(c))]
-        server, server_out = start(server_argv, t1.env)
-        wait_until(lambda: port_open("127.0.0.1", port), 15, what="make run's mosquitto")
-        wait_until(lambda: any("running with 3 device(s)" in ln for ln in server_out), 15, what="the gateway")
-
-        # terminal 2: the monitor (a pipe, not a terminal: one line per message)
-        t2 = Terminal(env)
-        (monitor_argv,) = [a for c in terminals[2] if (a := t2.line(c))]
-        monitor, view = start(monitor_argv, t2.env)
-        wait_until(lambda: any("monitoring gateway" in ln for ln in view), 10, what="the monitor")
-
-        def values(sn: str, field: str) -> list[float]:
-            pattern = re.compile(rf"osd    {sn} .*\b{field}=(-?[\d.]+)")
-            return [float(m.group(1)) for ln in list(view) if (m := pattern.search(ln))]
-
-        wait_until(lambda: values("RSDK-SIM-0001", "gimbal_yaw"), 10, what="the gimbal in the monitor")
-        wait_until(lambda: values("OSDK-SIM-0001", "elevation"), 10, what="the aircraft in the monitor")
-        assert values("RSDK-SIM-0001", "gimbal_yaw")[-1] == pytest.approx(0.0, abs=0.5)
-        assert values("OSDK-SIM-0001", "elevation")[-1] == pytest.approx(0.0, abs=0.5)
-
-        # terminal 3: the sends, one after the other, each must succeed
-        t3 = Terminal(env)
-        for command in terminals[3]:
-            argv = t3.line(command)
-            if argv is None:
+        last: int | None = None
+        for block in command_blocks():
+            if block.skip is not None:
                 continue
-            done = subprocess.run(argv, cwd=REPO, env=t3.env, capture_output=True, text=True, timeout=30)
-            assert done.returncode == 0, (command, done.stdout, done.stderr)
-            assert '"result": 0' in done.stdout, done.stdout
+            for term, command in block.terminals():
+                term = last if term is None else term
+                last = term
+                shell = terminals.setdefault(term, Terminal(env, port))
+                if shell.take(command):
+                    continue
+                if _is_service(command):
+                    start(command, shell.script(command))
+                    continue
+                done = subprocess.run(
+                    ["bash", "-c", shell.script(command)], cwd=REPO, env=env, capture_output=True, text=True,
+                    timeout=60,
+                )  # fmt: skip
+                assert done.returncode == 0, (
+                    f"README line {block.line}: {command}",
+                    done.stdout,
+                    done.stderr,
+                )
+                ran.append((command, done))
 
-        # the monitor shows the gimbal turned to 28° and the aircraft climbing
-        wait_until(
-            lambda: any(abs(v - 28.0) < 0.5 for v in values("RSDK-SIM-0001", "gimbal_yaw")),
-            10,
-            what="gimbal_yaw 28 in the monitor",
-        )
-        wait_until(lambda: max(values("OSDK-SIM-0001", "elevation")) > 2.0, 15, what="the aircraft climbing")
-        assert any("takeoff_to_point_progress" in ln for ln in view)
+        server_out = services["make run"][1]
+        (view,) = [out for name, (_, out) in services.items() if name.startswith("dji-gateway monitor")]
+        _check_what_the_reader_saw(ran, view, server_out)
 
-        # Ctrl-C in terminal 2 and terminal 1: both end cleanly, make run stops its mosquitto
-        monitor.send_signal(signal.SIGINT)
-        assert monitor.wait(10) == 0
-        server.send_signal(signal.SIGINT)
-        assert server.wait(20) == 0, "\n".join(server_out[-40:])
+        # Ctrl-C in the monitor's terminal and in make run's: both end cleanly, make run stops its mosquitto
+        for name, (proc, out) in reversed(list(services.items())):
+            proc.send_signal(signal.SIGINT)
+            assert proc.wait(20) == 0, (name, "\n".join(out[-40:]))
         assert not port_open("127.0.0.1", port)
-        assert "Traceback" not in "\n".join(server_out + view)
+        everything = "\n".join(server_out + view)
+        assert "Traceback" not in everything
+        # the walkthrough is clean by default: the monitor answered the events, none was re-sent or lost
+        assert "was never answered" not in everything
     finally:
-        for proc in procs:
+        for proc, _ in services.values():
             if proc.poll() is None:
                 proc.kill()
                 proc.wait(5)
-                proc.wait(5)
             if proc.stdout:
                 proc.stdout.close()
+
+
+def _check_what_the_reader_saw(
+    ran: list[tuple[str, subprocess.CompletedProcess[str]]], view: list[str], server_out: list[str]
+) -> None:
+    """What the README promises a reader sees, beyond every command exiting 0."""
+
+    def values(sn: str, field: str) -> list[float]:
+        pattern = re.compile(rf"osd    {sn} .*\b{field}=(-?[\d.]+)")
+        return [float(m.group(1)) for ln in list(view) if (m := pattern.search(ln))]
+
+    # every send got result 0 and printed its reply
+    for command, done in ran:
+        if command.startswith("dji-gateway send "):
+            assert '"result": 0' in done.stdout or '"seq": 1' in done.stdout, (command, done.stdout)
+        if command.startswith("dji-gateway decode "):
+            frames = [json.loads(ln) for ln in done.stdout.splitlines()]
+            assert frames and all(f["valid"] for f in frames), (command, done.stdout)
+    # the monitor, started after the gateway's update_topo, learnt the topology from /status
+    assert any("topo   DJIGW-SIM-0001: " in ln and "OSDK-SIM-0001" in ln for ln in view), view[:20]
+    # the gimbal turned to 28°, the aircraft climbed in a wayline (mode_code labelled)
+    wait_until(
+        lambda: any(abs(v - 28.0) < 0.5 for v in values("RSDK-SIM-0001", "gimbal_yaw")),
+        10,
+        what="gimbal_yaw 28 in the monitor",
+    )
+    wait_until(
+        lambda: max(values("OSDK-SIM-0001", "elevation") or [0]) > 2.0, 20, what="the aircraft climbing"
+    )
+    assert any("mode_code=5(wayline)" in ln for ln in view)
+    wait_until(lambda: any("takeoff_to_point_progress" in ln for ln in view), 10, what="progress events")
+    # each event is shown once: the monitor answered it, the gateway did not re-send it
+    events = [ln.split("event  ", 1)[1] for ln in view if "event  " in ln]
+    assert events and len(events) == len(set(events)), events
 
 
 # ------------------------------------------------------------------------------------------ drift checks
