@@ -18,6 +18,7 @@ where ``ps`` would show them.
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import os
 import sys
@@ -747,9 +748,22 @@ def _age(now: float, then: float | None) -> str:
     return "—" if then is None else f"{max(0.0, now - then):.1f}s"
 
 
-def render(state: MonitorState, now: float, broker: str = "", height: int | None = None) -> RenderableType:
-    """The live view: devices (online, osd), the DRC session, the latest events and replies (as many as
-    fit in ``height`` rows, when given; 12 otherwise)."""
+def render(
+    state: MonitorState, now: float, broker: str = "", height: int | None = None, width: int = 120
+) -> RenderableType:
+    """The live view: devices (online, osd), the DRC session, the latest events and replies: as many as
+    fit in ``height`` rows of ``width`` columns (the terminal's), or 12 when no height is given."""
+    if height is None:
+        return _view(state, now, broker, 12)
+    from rich.console import Console
+
+    # measure the view without events at this width (lines wrap), and give the events what is left
+    console = Console(width=width, file=io.StringIO())
+    bare = len(console.render_lines(_view(state, now, broker, 0), console.options, pad=False))
+    return _view(state, now, broker, max(3, height - bare - 1))
+
+
+def _view(state: MonitorState, now: float, broker: str, rows: int) -> RenderableType:
     from rich.console import Group
     from rich.panel import Panel
     from rich.table import Table
@@ -803,10 +817,6 @@ def render(state: MonitorState, now: float, broker: str = "", height: int | None
     events = Table(title="events and replies", expand=True, title_justify="left", show_header=False)
     events.add_column("age", width=7, no_wrap=True)
     events.add_column("what", overflow="ellipsis", no_wrap=True, ratio=1)
-    # the rows left once the rest is drawn: frame 2 + head 1 + devices (title, rule, header, bottom) +
-    # the DRC panel (frame 2 + its rows) + the events title
-    used = 2 + 1 + (4 + len(state.devices)) + (2 + drc_table.row_count) + 1 + 2
-    rows = 12 if height is None else max(3, height - used)
     for at, text in list(state.events)[::-1][:rows]:
         events.add_row(_age(now, at), text)
     return Panel(
@@ -936,7 +946,8 @@ def cmd_monitor(ns: argparse.Namespace) -> int:
 
         def view() -> RenderableType:
             with lock:
-                return render(state, time.monotonic(), ns.broker, height=console.size.height)
+                size = console.size
+                return render(state, time.monotonic(), ns.broker, height=size.height, width=size.width)
 
         with Live(view(), console=console, refresh_per_second=4, screen=False) as live:
             while deadline is None or time.monotonic() < deadline:

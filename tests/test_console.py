@@ -4,6 +4,7 @@ the rich view, including the DRC session) and can answer events as the cloud wou
 
 from __future__ import annotations
 
+import io
 import json
 import re
 import subprocess
@@ -18,7 +19,7 @@ from rich.console import Console
 
 from adapters.rsdk.sim import GimbalCanSim
 from gateway.cli import main
-from gateway.console import MonitorState, build_message, parse_fields, render
+from gateway.console import _FAILSAFE_TEXT, MonitorState, build_message, parse_fields, render
 from gateway.local_broker import LocalBroker, free_port
 from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
 
@@ -369,3 +370,68 @@ def test_the_monitor_shows_the_failsafe_that_fired_and_clears_a_heartbeat_one() 
     _feed(st, osd, fired, 105.0)
     console.print(render(st, 106.0, "mqtt://127.0.0.1:1883"))
     assert "stick timeout" in console.export_text()
+
+
+def test_the_monitor_shows_an_event_once_and_knows_which_still_want_an_answer() -> None:
+    st = MonitorState(GW)
+    event = {"tid": "e-1", "bid": "b", "method": "takeoff_to_point_progress", "need_reply": 1, "data": {}}
+    assert len(_feed(st, f"thing/product/{GW}/events", event, 1.0)) == 1
+    assert st.wants_answer("e-1")
+    assert _feed(st, f"thing/product/{GW}/events", event, 4.0) == []  # the gateway's re-send: shown once
+    assert st.resent == 1
+    _feed(st, f"thing/product/{GW}/events_reply", {"tid": "e-1", "data": {"result": 0}}, 4.1)
+    assert not st.wants_answer("e-1")  # another cloud answered it
+    quiet = {**event, "tid": "e-2", "need_reply": 0}
+    _feed(st, f"thing/product/{GW}/events", quiet, 5.0)
+    assert not st.wants_answer("e-2")
+
+
+def test_the_monitor_learns_the_topology_from_status_and_labels_mode_code() -> None:
+    st = MonitorState(GW)
+    doc = {"gateway_sn": GW, "devices": [{"sn": SN, "domain": "1", "online": True},
+                                         {"sn": "OSDK-X", "domain": "0", "online": False}]}  # fmt: skip
+    assert st.learn_status({**doc, "gateway_sn": "GW-OTHER"}, 1.0) == []  # another gateway's
+    (line,) = st.learn_status(doc, 1.0)
+    assert line.endswith(f"topo   {GW}: {SN}(domain 1) (from the gateway's /status)")
+    assert st.devices[SN].online and not st.devices["OSDK-X"].online
+    assert st.topology_source == "/status"
+    # an update_topo on the broker is the better source from then on
+    topo = {"method": "update_topo", "data": {"sub_devices": [{"sn": "OSDK-X", "domain": "0"}]}}
+    _feed(st, f"thing/product/{GW}/status".replace("thing", "sys"), topo, 2.0)
+    assert st.topology_source == "" and st.devices["OSDK-X"].online and not st.devices[SN].online
+    (osd,) = _feed(
+        st, "thing/product/OSDK-X/osd", {"gateway": GW, "data": {"mode_code": 5, "height": 80.0}}, 3.0
+    )
+    assert "mode_code=5(wayline)" in osd
+
+
+def test_the_monitor_says_when_a_failsafe_fires_and_clears() -> None:
+    st = MonitorState(GW)
+    osd = {"data": {"drc_state": 2, "x_drc_failsafe": {"reason": "sticks", "since": int(time.time() * 1000)}}}
+    lines = _feed(st, f"thing/product/{GW}/osd", osd, 1.0)
+    assert any("FAILSAFE stick timeout" in ln for ln in lines)
+    assert _feed(st, f"thing/product/{GW}/osd", osd, 1.5) == []  # the same failsafe, still holding
+    cleared = _feed(
+        st, f"thing/product/{GW}/osd", {"data": {"drc_state": 2, "x_drc_failsafe": {"reason": "none"}}}, 2.0
+    )
+    assert any("failsafe cleared" in ln for ln in cleared)
+    assert [text for _, text in st.events][-2:] == [
+        f"FAILSAFE {_FAILSAFE_TEXT['sticks']}",
+        cleared[0].split("drc    ")[1],
+    ]
+
+
+def test_the_rich_view_fills_the_terminal_height_with_events() -> None:
+    st = MonitorState(GW)
+    for i in range(60):
+        _feed(st, f"thing/product/{GW}/events", {"tid": f"t{i}", "method": f"ev_{i}", "data": {}}, float(i))
+
+    def drawn(height: int) -> str:
+        console = Console(width=120, height=height, record=True, file=io.StringIO())
+        console.print(render(st, 100.0, height=height, width=120))
+        return console.export_text()
+
+    small, tall = drawn(30), drawn(60)
+    assert len(small.splitlines()) <= 30 and len(tall.splitlines()) <= 60
+    assert tall.count("event ev_") > small.count("event ev_") >= 3
+    assert "event ev_59" in small  # the newest first

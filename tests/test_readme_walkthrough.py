@@ -5,6 +5,7 @@ configuration reference, the result codes and the metric names in the README can
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shlex
@@ -228,6 +229,12 @@ def test_every_readme_command_block_runs_as_a_reader_would() -> None:
         server_out = services["make run"][1]
         (view,) = [out for name, (_, out) in services.items() if name.startswith("dji-gateway monitor")]
         _check_what_the_reader_saw(ran, view, server_out)
+        # the walkthrough is clean by default: the monitor answered every event before the gateway re-sent it
+        from gateway.status_cli import fetch
+
+        counters = fetch(f"http://127.0.0.1:{metrics_port}", "/status")[1]["counters"]
+        assert counters.get("events_published_total", 0) >= 3, counters
+        assert counters.get("events_resent_total", 0) == 0, counters
 
         # Ctrl-C in the monitor's terminal and in make run's: both end cleanly, make run stops its mosquitto
         for name, (proc, out) in reversed(list(services.items())):
