@@ -33,6 +33,7 @@ from adapters.base import (
     MethodNotSupported,
 )
 from gateway import logcontext
+from gateway.audit import audit, audited
 from gateway.clock import Clock
 from gateway.devices import DeviceTable
 from gateway.metrics import Metrics
@@ -261,6 +262,10 @@ class Dispatcher:
             int(result),
             elapsed * 1000,
         )
+        if audited(request.method):  # who moved what (a repeated tid is answered from the cache, not here)
+            device = logcontext.current().get("device")
+            audit("service", method=request.method, tid=tid, bid=request.bid, source="mqtt",
+                  result=int(result), device=device)  # fmt: skip
         self._publish_reply(raw, entry)
 
     async def _execute(self, request: Any) -> tuple[int, dict[str, Any] | None]:

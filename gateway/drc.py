@@ -52,6 +52,7 @@ from pydantic import ValidationError
 
 from adapters.base import Adapter
 from gateway import drc_session as ds
+from gateway.audit import audit
 from gateway.clock import Clock, SystemClock
 from gateway.devices import DeviceTable
 from gateway.metrics import Metrics
@@ -574,6 +575,7 @@ class DrcController:
         except ValidationError as exc:
             if _ESTOP.search(payload) is not None:  # a stop is never refused for a parsing reason
                 self.metrics.inc("drc_rejected_total", reason="invalid_stop_obeyed")
+                audit("emergency_stop", method="drone_emergency_stop", source="drc", unparseable=True)
                 self._feed(ds.EStop(now, session, _Down(via, None)))
                 return
             self.metrics.inc("drc_rejected_total", reason="invalid")
@@ -599,6 +601,7 @@ class DrcController:
                 )
             )
         elif method == "drone_emergency_stop":
+            audit("emergency_stop", method=method, source="drc", seq=getattr(request.data, "seq", None))
             self._feed(ds.EStop(now, session, _Down(via, request)))
 
     def _to_body(self, data: Any) -> ds.SetPoint:
@@ -678,8 +681,10 @@ class DrcController:
             self._push_task = None
         if state == 2:
             log.info("DRC session started (%s broker)", "dedicated" if self.dedicated_link else "main")
+            audit("drc_enter", broker="dedicated" if self.dedicated_link else "main", result=int(result))
         elif state == 0:
             log.info("DRC session ended (result %d)", result)
+            audit("drc_exit", result=int(result))
 
     def _notify(self, state: int, result: int) -> None:
         self.publish_event("drc_status_notify", {"result": int(result), "drc_state": state}, True)

@@ -156,6 +156,9 @@ class JsonFormatter(logging.Formatter):
             value = getattr(record, key, "")
             if value:
                 out[key] = value
+        audit = getattr(record, "audit", None)
+        if isinstance(audit, dict):  # gateway.audit: the line's fields as an object
+            out["audit"] = {k: scrub(v) if isinstance(v, str) else v for k, v in audit.items()}
         if record.exc_info:
             out["exc"] = self.formatException(record.exc_info)
         # masked before encoding: JSON escapes would hide a secret holding a quote or a backslash
