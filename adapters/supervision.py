@@ -2,7 +2,8 @@
 
 Every family has one link (a CAN bus, a serial port) that fails and comes back, and a device that
 may fall silent while its link stays up. The rules are the same for all of them: reopen a closed
-link every ``reopen_interval`` (absent hardware is not an error), call the device offline after
+link every ``reopen_interval`` (absent hardware is not an error: said once, then backing off, see
+``adapters/absence.py``), call the device offline after
 ``silence_timeout`` without a valid frame, and report each change of the online flag once through
 :meth:`~adapters.base.TelemetrySink.online_changed`. :class:`SupervisedAdapter` owns that loop
 and that flag, so they cannot drift apart between families; a family says only what differs
@@ -18,6 +19,7 @@ import logging
 from collections.abc import Callable
 from typing import ClassVar, Protocol
 
+from adapters.absence import Absence
 from adapters.base import Adapter, DeviceInfo, TelemetrySink
 
 __all__ = ["SupervisedAdapter", "SupervisedLink", "SupervisionTiming"]
@@ -73,6 +75,7 @@ class SupervisedAdapter(Adapter):
         self._stopping = False
         self._last_heard = float("-inf")  # when the device last sent a valid frame (``now`` clock)
         self.link_opens = 0  # successful opens by the supervisor: the first one and every reopen
+        self._absence = Absence(timing.reopen_interval)
 
     @property
     def online(self) -> bool:
@@ -82,20 +85,22 @@ class SupervisedAdapter(Adapter):
     async def _supervise(self) -> None:
         """Keep the link open (a failed open is retried every ``reopen_interval``, the device
         offline meanwhile) and, every 0.1 s while it is up, run :meth:`_supervise_tick`."""
-        timing = self._timing
         while not self._stopping:
             link = self._link
             assert link is not None
             if not link.up:
+                what = f"{self.noun} {self.info.sn}"
                 try:
                     await link.open()
                 except self.link_error as exc:
-                    self._log.info(
-                        "%s %s: %s; retrying in %.1fs", self.noun, self.info.sn, exc, timing.reopen_interval
-                    )
+                    # absent hardware: said once with a hint, then quiet and backing off (adapters/absence.py)
+                    decision = self._absence.failed(self._now(), str(exc), what)
+                    self._log.log(decision.level, "%s", decision.message)
                     self._set_online(False)
-                    await asyncio.sleep(timing.reopen_interval)
+                    await asyncio.sleep(decision.delay)
                     continue
+                if (back := self._absence.opened(self._now(), what)) is not None:
+                    self._log.info("%s", back)
                 self.link_opens += 1
                 self._on_link_opened()
             await self._supervise_tick(self._now())
