@@ -239,6 +239,10 @@ def cmd_check_config(ns: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"dji-gateway: {exc}", file=sys.stderr)
         return 2
+    from gateway.environment import warnings
+
+    for warning in warnings(type(settings)):
+        print(f"warning: {warning}", file=sys.stderr)
     print(json.dumps(resolved(settings), indent=2))
     kinds = ", ".join(f"{d.type} {d.sn}" for d in settings.devices) or "no devices"
     print(f"config ok: gateway {settings.gateway_sn}, {kinds}", file=sys.stderr)

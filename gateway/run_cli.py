@@ -133,6 +133,10 @@ def cmd_run(ns: argparse.Namespace) -> int:
         print(f"dji-gateway: cannot read config: {exc}", file=sys.stderr)
         return 2
     setup_logging(settings.log_level, settings.log_json)
+    from gateway.environment import warnings
+
+    for warning in warnings(GatewaySettings):  # a misspelt DJIGW_* variable would be ignored silently
+        log.warning("%s", warning)
     return asyncio.run(_run(settings, simulate=ns.simulate))
 
 

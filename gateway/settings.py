@@ -197,10 +197,14 @@ class GatewaySettings(BaseSettings):
 
 
 def _one_line(exc: ValidationError) -> str:
+    from gateway.environment import variable_for
+
     err = exc.errors()[0]
     where = ".".join(str(p) for p in err["loc"]) or "(top level)"
+    var = variable_for(err["loc"]) if err["loc"] else None  # the environment wins: name what set it
+    source = f" (from ${var})" if var else ""
     more = f" (+{exc.error_count() - 1} more)" if exc.error_count() > 1 else ""
-    return f"config error at {where}: {err['msg']}{more}"
+    return f"config error at {where}{source}: {err['msg']}{more}"
 
 
 def load_settings(path: Path | str | None = None, **overrides: Any) -> GatewaySettings:

@@ -31,12 +31,16 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "status",
         help="print the live state of a running gateway (devices, links, DRC)",
-        description="Read a running gateway's /status (or /healthz with --check) endpoint.",
+        description="Read a running gateway's /status endpoint (or /healthz with --check) and print its "
+        "devices, links, broker and DRC session (full width in a pipe). Exit 0 healthy, 1 unhealthy, 2 when "
+        "no gateway answers.",
     )
     p.add_argument("--url", help="default http://127.0.0.1:$DJIGW_METRICS__PORT (9108)")
     p.add_argument("--json", action="store_true", help="print the status document as JSON")
-    p.add_argument("--check", action="store_true", help="health check only: exit 0 healthy, 1 unhealthy")
-    p.add_argument("--timeout", type=float, default=3.0)
+    p.add_argument(
+        "--check", action="store_true", help="health check only (/healthz): one line and the exit code"
+    )
+    p.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for the gateway (3)")
     p.set_defaults(handler=cmd_status)
 
 
@@ -77,7 +81,8 @@ def _print(doc: dict[str, Any]) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    # a pipe or a file gets every column (rich would cut it to 80); a terminal its own width
+    console = Console() if sys.stdout.isatty() else Console(width=int(os.environ.get("COLUMNS") or 200))
     broker = doc.get("broker", {})
     health = "[green]healthy[/]" if doc.get("healthy") else "[red]unhealthy[/]"
     failing = [name for name, ok in doc.get("checks", {}).items() if not ok]

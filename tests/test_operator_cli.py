@@ -191,3 +191,101 @@ def test_schema_export_without_a_folder_never_writes_into_an_installed_package(t
     )
     assert done.returncode == 0, done.stderr
     assert (out / "bundle.json").is_file()
+
+
+# ------------------------------------------------------------------------------------------ environment
+def test_a_bad_environment_value_names_the_variable(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("DJIGW_METRICS__PORT", "abc")
+    assert main(["check-config", str(REPO / "config" / "gateway.example.toml")]) == 2
+    err = capsys.readouterr().err
+    assert "config error at metrics.port (from $DJIGW_METRICS__PORT): Input should be a valid integer" in err
+
+
+def test_an_unknown_djigw_variable_is_warned_about(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from gateway.environment import settings_variables, unknown_variables
+    from gateway.settings import GatewaySettings
+
+    assert {"DJIGW_METRICS__PORT", "DJIGW_BROKER__PASSWORD", "DJIGW_DEVICES"} <= settings_variables(
+        GatewaySettings
+    )
+    monkeypatch.setenv("DJIGW_LOG_LEVLE", "DEBUG")
+    monkeypatch.setenv("DJIGW_CONSOLE_BROKER", "mqtt://127.0.0.1:1")  # the console's: known
+    assert unknown_variables(GatewaySettings) == [("DJIGW_LOG_LEVLE", "DJIGW_LOG_LEVEL")]
+    assert main(["check-config", str(REPO / "config" / "gateway.example.toml")]) == 0
+    err = capsys.readouterr().err
+    assert (
+        "warning: environment variable DJIGW_LOG_LEVLE sets nothing (ignored); did you mean DJIGW_LOG_LEVEL?"
+        in err
+    )
+
+
+# ------------------------------------------------------------------------------------------ help = README
+def _readme_commands() -> dict[str, str]:
+    """README's command-line table: sub-command → its usage cell."""
+    import re
+
+    section = (REPO / "README.md").read_text().split("## The command line", 1)[1].split("\n## ", 1)[0]
+    rows = re.findall(r"^\| `dji-gateway ([a-z-]+(?: export)?)([^`]*)` \|", section, re.M)
+    return {name: usage for name, usage in rows}
+
+
+def test_every_command_and_option_is_in_the_readme_and_the_other_way_round() -> None:
+    import argparse
+    import re
+
+    from gateway.cli import build_parser
+
+    parser = build_parser()
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    documented = _readme_commands()
+    commands = {name: p for name, p in sub.choices.items() if name != "schema"}
+    commands["schema export"] = next(
+        a for a in sub.choices["schema"]._actions if isinstance(a, argparse._SubParsersAction)
+    ).choices["export"]
+    assert sorted(documented) == sorted(commands), "README's command table and the CLI differ"
+    for name, p in commands.items():
+        if name == "simulate":  # its options are each simulator's own (simulate rsdk --help)
+            continue
+        options = {o for a in p._actions for o in a.option_strings if o.startswith("--") and o != "--help"}
+        in_readme = set(re.findall(r"--[a-z][a-z-]*", documented[name]))
+        assert options == in_readme, (
+            name,
+            "only in --help:",
+            options - in_readme,
+            "only in README:",
+            in_readme - options,
+        )
+    send_help = commands["send"].format_help()
+    for code in ("0 on result 0", "1 on an error result", "2 when", "3 when"):
+        assert code in " ".join(send_help.split()), code
+    status_help = " ".join(commands["status"].format_help().split())
+    assert "exit 0 healthy, 1 unhealthy, 2 when no gateway answers" in status_help
+
+
+@pytest.mark.broker
+def test_status_in_a_pipe_is_not_cut_to_80_columns(broker: LocalBroker, can_channel: str) -> None:
+    from adapters.rsdk.sim import GimbalCanSim
+    from tests.support import GatewayThread
+
+    sim = GimbalCanSim(interface="virtual", channel=can_channel).start()
+    device = {"type": "rsdk", "sn": "RSDK-A-VERY-LONG-SERIAL-NUMBER-0001", "interface": "virtual",
+              "channel": can_channel}  # fmt: skip
+    settings = gateway_settings(broker.port, [device], metrics={"enabled": True, "port": 0})
+    try:
+        with GatewayThread(settings) as gw:
+            wait_until(lambda: gw.app.devices.by_sn(device["sn"]).online, 5, what="gimbal online")
+            env = {k: v for k, v in os.environ.items() if k != "COLUMNS"}
+            done = subprocess.run(
+                [sys.executable, "-m", "gateway.cli", "status", "--url", f"http://127.0.0.1:{gw.app.observability.port}"],
+                env=env, capture_output=True, text=True, timeout=30,
+            )  # fmt: skip
+    finally:
+        sim.stop()
+    assert done.returncode == 0, done.stderr
+    (row,) = [ln for ln in done.stdout.splitlines() if device["sn"] in ln]
+    assert "…" not in done.stdout and len(row) > 80
+    assert "frames in/out" in done.stdout
