@@ -12,7 +12,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from gateway import codec_cli, config_cli, console, contract_cli, run_cli, status_cli
+from gateway import codec_cli, config_cli, console, contract_cli, fly, run_cli, status_cli
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -24,6 +24,7 @@ def build_parser() -> argparse.ArgumentParser:
     run_cli.add_parsers(sub)
     console.add_parsers(sub)
     contract_cli.add_parsers(sub)
+    fly.add_parsers(sub)
     status_cli.add_parsers(sub)
     config_cli.add_parsers(sub)
     codec_cli.add_parsers(sub)

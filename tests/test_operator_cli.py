@@ -263,7 +263,7 @@ def test_every_command_and_option_is_in_the_readme_and_the_other_way_round() -> 
     for code in ("0 on result 0", "1 on an error result", "2 when", "3 when"):
         assert code in " ".join(send_help.split()), code
     status_help = " ".join(commands["status"].format_help().split())
-    assert "exit 0 healthy, 1 unhealthy, 2 when no gateway answers" in status_help
+    assert "Exit 0 healthy, 1 unhealthy, 2 when no gateway answers" in status_help
 
 
 @pytest.mark.broker
