@@ -27,6 +27,7 @@ from gateway.clock import Clock, SystemClock
 from gateway.devices import DeviceTable
 from gateway.dispatcher import Dispatcher
 from gateway.drc import DrcController
+from gateway.farewell import left_doing
 from gateway.metrics import Metrics
 from gateway.mqtt import MqttBridge
 from gateway.northbound import Northbound
@@ -195,6 +196,8 @@ class GatewayApp:
                 self.metrics.inc("drc_stop_failures_total", reason="shutdown", device="-")
                 log.exception("stopping live control failed; stopping every device directly")
         await asyncio.gather(*(a.stop_motion() for a in self.devices), return_exceptions=True)
+        for adapter in self.devices:  # what the operator who pressed Ctrl-C needs to know
+            log.info("%s", left_doing(adapter))
         consumer.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await consumer

@@ -97,6 +97,11 @@ def test_sigterm_mid_mission_stops_every_device(broker: LocalBroker, tmp_path: P
         wait_until(lambda: fc.inspect(lambda m: m.speed) < 0.3, 10, what="aircraft hovering")
         assert cloud.wait_for("status", timeout=5)[-1]["data"]["sub_devices"] == []
         assert elapsed < 10.0
+        # the take-off's final progress event went out before the offline topology
+        kinds = [(t.rsplit("/", 1)[1], b.get("method"), (b.get("data") or {}).get("status"))
+                 for t, b, _ in list(cloud.messages) if b is not None]  # fmt: skip
+        final = ("events", "takeoff_to_point_progress", "wayline_cancel")
+        assert final in kinds and kinds.index(final) < kinds.index(("status", "update_topo", None)), kinds
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -108,3 +113,7 @@ def test_sigterm_mid_mission_stops_every_device(broker: LocalBroker, tmp_path: P
         for e in endpoints:
             e.stop()
     assert "Traceback" not in out, out[-3000:]
+    # what each device was left doing, for the operator who stopped it
+    assert "left FC-STOP-1 (aircraft) hovering at " in out and "m above home, its task cancelled" in out
+    assert "left RS-STOP-1 (gimbal) holding yaw " in out
+    assert "left RM-STOP-1 (robot) stopped" in out

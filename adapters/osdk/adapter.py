@@ -194,9 +194,15 @@ class AircraftAdapter(SupervisedAdapter):
         """Failsafe: zero velocity with the stable bit (brake and hover), sent at once on session 0,
         without waiting for anything; then what ``on_stop`` says (a mission in flight is cancelled)."""
         self.send_movement(0.0, 0.0, 0.0, 0.0)
-        if self.mission is not None and not self.mission.finished:
+        task = self.mission
+        if task is not None and not task.finished:
             with contextlib.suppress(Exception):
                 self._fire("wp_start_stop", {"start": 1})
+            # the cloud hears the task's end (its final progress event), as after fly_to_point_stop
+            task.finished = True
+            if self._mission_task is not None:
+                self._mission_task.cancel()
+            self._progress(task, "wayline_cancel", task.reached - task.offset)
         if self.settings.on_stop == "land" and self.in_air:
             with contextlib.suppress(Exception):
                 self._fire("flight_task", self._task_fields("landing"))
