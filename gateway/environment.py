@@ -33,6 +33,7 @@ OTHER_VARIABLES = frozenset(
         "DJIGW_GATEWAY_PASSWORD",
         "DJIGW_CLOUD_USER",
         "DJIGW_CLOUD_PASSWORD",
+        "DJIGW_MQTT_PORT",
     }
 )
 

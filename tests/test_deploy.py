@@ -332,6 +332,29 @@ def _login(port: int, username: str, password: str) -> tuple[paho.Client | None,
 
 
 @pytest.mark.broker
+def _readme_stack_commands(
+    broker_port: int, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Run the README's compose block: its exports, then each ``dji-gateway`` line; the service names
+    become this stack's loopback port, as everywhere in this file (host port 1884 included)."""
+    readme = (REPO / "README.md").read_text()
+    block = next(b for b in readme.split("```sh\n")[1:] if "mqtt_broker.address=mosquitto:1883" in b)
+    lines = block.split("```", 1)[0].replace("\\\n", " ").splitlines()
+    sent = 0
+    for line in (ln.strip() for ln in lines):
+        line = line.replace("mosquitto:1883", f"127.0.0.1:{broker_port}").replace(":1884", f":{broker_port}")
+        words = shlex.split(line)
+        if words[:1] == ["export"]:
+            for word in words[1:]:
+                name, _, value = word.partition("=")
+                monkeypatch.setenv(name, CLOUD_PW if name == "DJIGW_CONSOLE_PASSWORD" else value)
+        elif words[:1] == ["dji-gateway"]:
+            assert cli_main(words[1:]) == 0, (line, capsys.readouterr())
+            sent += 1
+    assert sent == 4
+    capsys.readouterr()
+
+
 def test_the_compose_topology_runs_as_plain_processes(
     stack: dict[str, Any], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -356,6 +379,8 @@ def test_the_compose_topology_runs_as_plain_processes(
         == 0
     )
     assert json.loads(capsys.readouterr().out)["data"]["result"] == 0
+    # the README's live-control commands for the stack, as written (the broker as the gateway reaches it)
+    _readme_stack_commands(stack["broker_port"], capsys, monkeypatch)
     # and the robot obeys a control message on its serial link
     assert cloud.service("x_robomaster_stop", {"sn": "RM-0001"})["data"]["result"] == 0
 
