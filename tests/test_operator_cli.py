@@ -289,3 +289,21 @@ def test_status_in_a_pipe_is_not_cut_to_80_columns(broker: LocalBroker, can_chan
     (row,) = [ln for ln in done.stdout.splitlines() if device["sn"] in ln]
     assert "…" not in done.stdout and len(row) > 80
     assert "frames in/out" in done.stdout
+
+
+# ------------------------------------------------------------------------------------------ make
+@pytest.mark.skipif(shutil.which("make") is None, reason="make is not installed")
+def test_make_run_installs_the_runtime_only_and_make_test_the_dev_extras(tmp_path: Path) -> None:
+    def pip_lines(target: str) -> list[str]:
+        # -n: print the recipes, run nothing; -B: as on a fresh clone (no stamp is up to date)
+        argv = ["make", "-n", "-B", target, f"VENV={tmp_path / 'venv'}"]
+        done = subprocess.run(argv, cwd=REPO, capture_output=True, text=True, timeout=60)
+        assert done.returncode == 0, done.stderr
+        return [ln for ln in done.stdout.splitlines() if "pip install" in ln and "--upgrade pip" not in ln]
+
+    assert [ln.split("pip install", 1)[1].split() for ln in pip_lines("run")] == [["--quiet", "-e", "."]]
+    assert any("'.[dev]'" in ln for ln in pip_lines("test"))
+    assert not any("[dev]" in ln for ln in pip_lines("run"))
+    assert (
+        "LICENSE" in (REPO / "pyproject.toml").read_text() and "MIT License" in (REPO / "LICENSE").read_text()
+    )
