@@ -25,6 +25,18 @@ from gateway.mqtt import close_client
 from gateway.settings import GatewaySettings, load_settings
 
 
+def docker_compose() -> list[str] | None:
+    """``docker compose`` where the client is installed, else None (``config`` needs no daemon)."""
+    import shutil
+    import subprocess
+
+    docker = shutil.which("docker")
+    if docker is None:
+        return None
+    probe = subprocess.run([docker, "compose", "version"], capture_output=True, timeout=20)
+    return [docker, "compose"] if probe.returncode == 0 else None
+
+
 def wait_until(
     predicate: Callable[[], Any], timeout: float = 5.0, interval: float = 0.01, what: str = ""
 ) -> Any:

@@ -12,7 +12,6 @@ import json
 import os
 import re
 import shlex
-import shutil
 import signal
 import subprocess
 import sys
@@ -36,6 +35,7 @@ from gateway.local_broker import find_mosquitto, free_port, port_open
 from gateway.mqtt import close_client
 from gateway.settings import load_settings
 from tests.support import CloudClient, wait_until
+from tests.support import docker_compose as docker_compose_client
 
 REPO = Path(__file__).resolve().parents[1]
 COMPOSE_FILE = REPO / "docker-compose.yml"
@@ -52,17 +52,9 @@ def ours(services: dict[str, Any]) -> dict[str, dict[str, Any]]:
     return {name: svc for name, svc in services.items() if "build" in svc}
 
 
-def _docker_compose() -> list[str] | None:
-    docker = shutil.which("docker")
-    if docker is None:
-        return None
-    probe = subprocess.run([docker, "compose", "version"], capture_output=True, timeout=20)
-    return [docker, "compose"] if probe.returncode == 0 else None
-
-
 # ------------------------------------------------------------------------------------------ static checks
 def test_the_compose_file_parses_and_wires_the_stack() -> None:
-    docker_compose = _docker_compose()
+    docker_compose = docker_compose_client()
     if docker_compose is not None:  # the real parser, where the client is installed
         run = subprocess.run([*docker_compose, "-f", str(COMPOSE_FILE), "config", "-q"], capture_output=True)
         assert run.returncode == 0, run.stderr

@@ -22,6 +22,7 @@ import yaml
 from gateway.local_broker import LocalBroker, free_port
 from gateway.settings import load_settings
 from tests.support import CloudClient
+from tests.support import docker_compose as docker_compose_client
 
 REPO = Path(__file__).resolve().parents[1]
 DOCKERFILE = (REPO / "Dockerfile").read_text()
@@ -31,14 +32,6 @@ def _hadolint() -> str | None:
     return shutil.which(
         "hadolint", path=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"
     )
-
-
-def _docker_compose() -> list[str] | None:
-    docker = shutil.which("docker")
-    if docker is None:
-        return None
-    probe = subprocess.run([docker, "compose", "version"], capture_output=True, timeout=20)
-    return [docker, "compose"] if probe.returncode == 0 else None
 
 
 def test_hadolint_passes_the_dockerfile() -> None:
@@ -140,7 +133,7 @@ def test_the_hardware_override_gives_the_gateway_the_hosts_devices() -> None:
 
 
 def test_docker_compose_config_accepts_both_files() -> None:
-    docker_compose = _docker_compose()
+    docker_compose = docker_compose_client()
     if docker_compose is None:
         pytest.skip(
             "the docker compose client is not installed here; the files are checked by the tests above"

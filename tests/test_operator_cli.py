@@ -168,27 +168,18 @@ def test_schema_export_without_a_folder_never_writes_into_an_installed_package(t
     before = sorted(p.name for p in (site / "schemas" / "json").iterdir())
     stamp = (site / "schemas" / "json" / "bundle.json").stat().st_mtime_ns
     env = {**os.environ, "PYTHONPATH": str(site)}
-    done = subprocess.run(
-        [sys.executable, "-m", "gateway.cli", "schema", "export"],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+
+    def export(*args: str) -> subprocess.CompletedProcess[str]:
+        argv = [sys.executable, "-m", "gateway.cli", "schema", "export", *args]
+        return subprocess.run(argv, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
+
+    done = export()
     assert done.returncode == 2, done.stderr
     assert "give a folder" in done.stderr
     assert sorted(p.name for p in (site / "schemas" / "json").iterdir()) == before
     assert (site / "schemas" / "json" / "bundle.json").stat().st_mtime_ns == stamp
     out = tmp_path / "contract"
-    done = subprocess.run(
-        [sys.executable, "-m", "gateway.cli", "schema", "export", str(out)],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    done = export(str(out))
     assert done.returncode == 0, done.stderr
     assert (out / "bundle.json").is_file()
 
