@@ -203,7 +203,7 @@ class _Session:
         self.link.open([*self.state.topics(), f"thing/product/{self.gw}/services_reply"])
 
     def request(self, method: str, data: dict[str, Any], timeout: float = 10.0) -> tuple[int, str]:
-        """One service and its result (325004-like 0 when nothing came: returned as -1)."""
+        """One service and its result code and reason; -1 when no reply came within ``timeout``."""
         body = build_message(method, data)
         self.link.publish(f"thing/product/{self.gw}/services", body)
         deadline = time.monotonic() + timeout

@@ -189,7 +189,8 @@ def test_fly_moves_the_aircraft_while_a_key_is_held_and_stops_it_on_quit(
         term.hold(b"w", 3.0)
         sticks = cloud.find("/drc/down", lambda b: b["method"] == "drone_control")
         hearts = cloud.find("/drc/down", lambda b: b["method"] == "heart_beat")
-        assert 20 <= len(sticks) <= 45 and 2 <= len(hearts) <= 5  # 10 Hz and 1 Hz for 3 s
+        # a stream (10 Hz and 1 Hz for 3 s; a late tick is skipped, never made up in a burst)
+        assert 10 <= len(sticks) <= 45 and 1 <= len(hearts) <= 5
         assert any(s["data"]["y"] == 2.0 for s in sticks)
         moved = _position(cloud)
         assert _metres(start, moved) > 2.0, (start, moved)
