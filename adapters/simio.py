@@ -111,14 +111,23 @@ class _Endpoint:
 
 
 class PtyEndpoint(_Endpoint):
-    """The device holds the master side; the host opens :attr:`path` (the slave) with pyserial."""
+    """The device holds the master side; the host opens :attr:`path` (the slave) with pyserial.
 
-    def __init__(self, device: StreamDevice, tick_interval: float = 0.01) -> None:
+    Like a UART without flow control, the device never waits for its host for long: when nobody reads
+    (the host program exited) a write waits at most ``write_timeout`` for room in the pty's buffer, then
+    the bytes are dropped (counted in :attr:`dropped`) and later writes are dropped at once until the
+    host reads again, so the device keeps ticking (a simulated aircraft keeps flying its mission)."""
+
+    def __init__(self, device: StreamDevice, tick_interval: float = 0.01, write_timeout: float = 1.0) -> None:
         super().__init__(device, tick_interval)
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)  # no echo, no CR/LF translation: a clean 8-bit line
         tty.setraw(self._master)
+        os.set_blocking(self._master, False)
         self.path = os.ttyname(self._slave)
+        self.write_timeout = write_timeout
+        self.dropped = 0  # bytes nobody read in time
+        self._stalled = False
 
     def _fd(self) -> int | None:
         return self._master
@@ -133,10 +142,23 @@ class PtyEndpoint(_Endpoint):
 
     def _write(self, data: bytes) -> None:
         with self._lock:
-            try:
-                os.write(self._master, data)
-            except OSError as exc:
-                log.debug("pty write failed: %s", exc)
+            view = memoryview(data)
+            deadline = time.monotonic() + (0.0 if self._stalled else self.write_timeout)
+            while view:
+                try:
+                    view = view[os.write(self._master, view) :]
+                    continue
+                except BlockingIOError:
+                    pass
+                except OSError as exc:
+                    log.debug("pty write failed: %s", exc)
+                    return
+                left = deadline - time.monotonic()
+                if left <= 0 or not select.select([], [self._master], [], left)[1]:
+                    self._stalled = True  # nobody reads: drop, and do not wait again until they do
+                    self.dropped += len(view)
+                    return
+            self._stalled = False
 
     def _close(self) -> None:
         for fd in (self._master, self._slave):

@@ -474,7 +474,10 @@ def test_mission_start_conditions() -> None:
     assert host.request("activate", {"app_id": APP_ID})["ack"] == 0
     assert host.request("wp_start_stop", {"start": 0})["ack"] == 0xD1  # no control authority
     assert host.request("obtain_control", {"control": 1})["ack"] == 2
-    assert host.request("wp_start_stop", {"start": 0})["ack"] == 0xDA  # on the ground
+    # on the ground: a hotpoint needs the air; a waypoint mission would take off (nothing uploaded yet)
+    assert host.request("hp_upload_start", {"hp_radius": 10.0, "angle_rate": 5.0})["ack"] == 0xDA
+    assert host.request("fm_upload_start", {})["ack"] == 0xDA
+    assert host.request("wp_start_stop", {"start": 0})["ack"] == 0xEA
     assert host.request("flight_task", {"command": TAKEOFF})["ack"] == 0
     assert host.request("wp_start_stop", {"start": 0})["ack"] == 0xF0  # taking off
     host.wait_for(lambda: host.model.task == "hover", 10)
@@ -626,13 +629,15 @@ def test_bad_payloads_get_the_commands_invalid_code() -> None:
 
 
 def test_unknown_commands_and_subscription_are_answered_not_ignored() -> None:
-    """A real FC answers what asks for an answer: DJI's Onboard-SDK library subscribes (0x0B) on A3
-    firmware 3.3+, and a silent FC left it waiting on its ACK until the time-out."""
+    """A real FC answers what asks for an answer: a silent FC leaves a client such as DJI's Onboard-SDK
+    library waiting on its ACK until the time-out. The subscription commands without a layout (0x0B
+    0x04..0x06; 0x00..0x03 are simulated, test_osdk_subscription.py) get the u8 "permission deny" the
+    library understands, never the u16 unknown-command code whose first byte reads as success."""
     host = FakeHost()
     host.request("activate", {"app_id": APP_ID})
     host.write(encode_command(0x07, 0x07, b"\x00", 2, 9))  # no such command
     assert host.ack_for(2, 9, timeout=0.1).data == UNKNOWN_COMMAND_ACK.to_bytes(2, "little")
-    for seq, cmd_id in ((10, 0x00), (11, 0x01), (12, 0x03)):  # verify, add package, remove package
+    for seq, cmd_id in ((10, 0x04), (11, 0x05), (12, 0x06)):  # frequency, pause/resume, config
         host.write(encode_command(0x0B, cmd_id, b"\x00" * 4, 2, seq))
         assert host.ack_for(2, seq, timeout=0.1).data == bytes([SUBSCRIBE_REFUSED_ACK])
     assert host.model.subscriptions_refused == 3 and host.model.unknown_commands == 4

@@ -25,6 +25,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from adapters.osdk import subscription as sub
 from adapters.osdk.protocol import SessionMode
 from adapters.osdk.telemetry import FlightDataCodec, check_firmware, examples_of
 from adapters.wire.bits import BitLayout, Bits
@@ -763,6 +764,7 @@ def _gs(
 
 _NOTES_ACT = "PROTOCOL-NOTES Activation and version"
 _NOTES_CTL = "PROTOCOL-NOTES control (0x01) and telemetry"
+_OSDK_SUB = "OSDK 3.9.0 dji_subscription.cpp"
 
 # fmt: off
 _SPECS: tuple[CommandSpec, ...] = (
@@ -831,12 +833,34 @@ _SPECS: tuple[CommandSpec, ...] = (
         doc="RC or mobile app took over: end DRC motion (joystick_invalid_notify reason 4)",
     ),
     CommandSpec(
+        "subscription_data_push", 0x02, 0x05, (sub.PACKAGE_DATA,), direction=FROM_FC,
+        session=SessionMode.NO_ACK, retries=0, firmware="new", section=_OSDK_SUB,
+        doc="one subscribed package: u8 id + its topics' structs (subscription.decode_package)",
+    ),
+    CommandSpec(
         "status_push", 0x02, 0x03, (STATUS_PUSH,), direction=FROM_FC, session=SessionMode.NO_ACK,
         retries=0, section="seed 004 0x02,0x03", doc="current mission status, shape by mission_type",
     ),
     CommandSpec(
         "event_push", 0x02, 0x04, (EVENT_PUSH,), direction=FROM_FC, session=SessionMode.NO_ACK,
         retries=0, section="seed 004 0x02,0x04", doc="waypoint mission event, shape by incident_type",
+    ),
+    # ---- data subscription set 0x0B (firmware 3.3+; subscription.py), OSDK's timing: 500 ms x 2 / x 1
+    CommandSpec(
+        "subscribe_verify", 0x0B, 0x00, (sub.VERIFY,), (U8_ACK,), sub.SUBSCRIBE_ACK, firmware="new",
+        section=_OSDK_SUB, doc="match the topic database version (0x00000100)",
+    ),
+    CommandSpec(
+        "subscribe_add_package", 0x0B, 0x01, (sub.ADD_PACKAGE,), (U8_ACK,), sub.SUBSCRIBE_ACK, retries=1,
+        firmware="new", section=_OSDK_SUB, doc="start pushing package 0..4: its rate and topic UIDs",
+    ),
+    CommandSpec(
+        "subscribe_reset", 0x0B, 0x02, (sub.RESET,), (U8_ACK,), sub.SUBSCRIBE_ACK, retries=1,
+        firmware="new", section=_OSDK_SUB, doc="remove every package",
+    ),
+    CommandSpec(
+        "subscribe_remove_package", 0x0B, 0x03, (sub.PACKAGE_ID,), (U8_ACK,), sub.SUBSCRIBE_ACK, retries=1,
+        firmware="new", section=_OSDK_SUB, doc="stop one package",
     ),
     # ---- ground station set 0x03 (seed 004)
     _gs(0x10, "wp_init", WP_INIT, (U8_ACK,), "upload waypoint task; ACK always 0: validate yourself"),

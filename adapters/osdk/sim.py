@@ -29,8 +29,10 @@ Choices where the protocol is silent (also next to the code that makes them):
   automatic task (take-off, landing, go home, mission) runs.
 * The emergency brake stops whatever the SDK started (movement, go home, landing, missions; no
   "finished" event), decelerates at the normal limit and holds where it stopped.
-* A waypoint mission starts only in the air (``0xDA`` "drone not in air when init" on the ground);
-  real M600/M210 missions are started after a take-off. It needs a complete, valid upload (``0xEA``
+* A waypoint mission started on the ground takes off first (motors on, the 1.2 m automatic take-off)
+  and then flies its route: DJI's own mission samples (Onboard-SDK 3.9.0 ``runWaypointMission``) start
+  it on the ground without a take-off, while they take off before a hotpoint; hotpoint and follow-me
+  on the ground get ``0xDA`` "drone not in air when init". A mission needs a complete, valid upload (``0xEA``
   nothing initialised, ``0xEB`` not all waypoints accepted). Validation happens when the last waypoint
   arrives (seed: "valid all waypoints' data together after the last one"), with the Mobile SDK's
   documented limits: 2..255 waypoints (``min_waypoints``), max speed 2..15 m/s, idle speed in
@@ -62,11 +64,12 @@ import signal
 import threading
 import zlib
 from collections import Counter
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
 from adapters.osdk import commands as cmds
+from adapters.osdk import subscription as sub
 from adapters.osdk.commands import (
     FRAME_BODY,
     HORIZONTAL_ANGLE,
@@ -110,11 +113,12 @@ NO_RIGHTS_ACK = 0xFF02  # OSDK ErrorCode::CommonACK::NO_RIGHTS_ERROR (flight tas
 #: ``ErrorCode::CommonACK::KEY_ERROR`` (0xFF00). Which code real firmware uses is not confirmed; what
 #: matters to a client is that the answer comes at once instead of a time-out.
 UNKNOWN_COMMAND_ACK = 0xFF00
-#: The data subscription set (0x0B: 0x00 verify, 0x01 add package, 0x02 reset, 0x03 remove, 0x05 pause...).
+#: The data subscription set (0x0B: 0x00 verify, 0x01 add package, 0x02 reset, 0x03 remove; subscription.py).
 SUBSCRIBE_SET = 0x0B
-#: Subscription is not simulated: every 0x0B command is refused with u8 OSDK
-#: ``ErrorCode::SubscribeACK::PERMISSION_DENY`` (0x23), so a client falls back to the 0x02 0x00 broadcast
-#: (what the gateway uses) at once instead of waiting on a time-out.
+#: The 0x0B commands without a known layout (0x04 frequency, 0x05 pause, 0x06 config: OSDK has no API for
+#: them) and every 0x0B command on M100 firmware (no subscription there) are refused with u8 OSDK
+#: ``ErrorCode::SubscribeACK::PERMISSION_DENY`` (0x23): never the u16 unknown-command code, whose first
+#: byte (0x00) the library would read as success.
 SUBSCRIBE_REFUSED_ACK = 0x23
 
 TAKEOFF_HEIGHT_M = 1.2
@@ -157,7 +161,11 @@ DISPLAY_MODES: dict[str, int] = {
 }
 RC_STICK_MODE = {"P": -8000, "A": 0, "F": 8000}
 # Undecodable payloads: the command's own "invalid" code where it has one; set 0x03 -> 0xF4.
-_BAD_PAYLOAD_ACK: dict[str, int] = {"activate": 0x0001, "set_broadcast_frequency": 0x0001, "flight_task": 10}
+_BAD_PAYLOAD_ACK: dict[str, int] = {
+    "activate": 0x0001,
+    "set_broadcast_frequency": 0x0001,
+    "flight_task": 10,
+} | sub.BAD_PAYLOAD_ACK
 _GS_INVALID = 0xF4
 
 
@@ -302,6 +310,8 @@ class OsdkFcModel:
         self.lost_authority_mode = lost_authority_mode
         self.version_name = version_name
         self.subscriptions_refused = 0  # 0x0B commands answered SUBSCRIBE_REFUSED_ACK
+        #: data subscription (0x0B, pushes 0x02 0x05): packages and their answers (subscription.py)
+        self.subscriptions = sub.FcSubscriptions()
         #: working obstacle sensors (an A3 has none; an M210 front, up and down): they read the height
         #: above ground downwards and ``obstacle_range`` (m, nothing closer) elsewhere
         self.obstacle_sensors: set[str] = set()
@@ -465,6 +475,8 @@ class OsdkFcModel:
             self._rx_at = None  # idle line: a bogus length must not hold back the frames behind it
             self._receive(self._decoder.flush(), now)
         self._telemetry(now)
+        for payload in self.subscriptions.pushes(now, _Sources(self, now)):
+            self._emit(self._table.send(0x02, 0x05, payload, now=now, mode=SessionMode.NO_ACK).frame, now)
         self._mission_status(now)
         poll = self._table.poll(now)
         for raw in poll.resend:
@@ -541,7 +553,10 @@ class OsdkFcModel:
             return
         self.actions[msg.name] += 1
         try:
-            reply = getattr(self, f"_on_{msg.name}")(msg.fields, now)
+            if cmd_set == SUBSCRIBE_SET:
+                reply = self.subscriptions.handle(msg.name, msg.fields, now)
+            else:
+                reply = getattr(self, f"_on_{msg.name}")(msg.fields, now)
             if frame.session and reply is not None:
                 self._ack(frame, cmds.encode_ack_payload(msg.name, reply, self.firmware), now)
         except (LayoutError, ValueError, KeyError) as exc:
@@ -793,7 +808,10 @@ class OsdkFcModel:
         if math.hypot(points[0].n - self.n, points[0].e - self.e) > self.max_distance_m:
             return {"ack": 0xC9}
         self.run = _Run(dict(up.info), points, lock_yaw=self.yaw)
-        self.task = "waypoint"
+        if self.in_air:
+            self.task = "waypoint"
+        else:
+            self._task_takeoff()  # on the ground: take off first, the mission follows (docstring)
         self._next_status = now
         return {"ack": 0}
 
@@ -812,8 +830,8 @@ class OsdkFcModel:
         busy = {"takeoff": 0xF0, "landing": 0xF1, "go_home": 0xF2}.get(self.task)
         if busy:
             return busy
-        if not self.in_air:
-            return 0xDA  # missions start from the air (module docstring)
+        if not self.in_air and kind != "waypoint":
+            return 0xDA  # hotpoint and follow-me start from the air (module docstring)
         return 0
 
     def _on_wp_pause_resume(self, f: dict[str, Any], now: float) -> dict[str, Any]:
@@ -1051,6 +1069,8 @@ class OsdkFcModel:
         n, e, u = self._hold
         if abs(u - self.u) < 0.05 and abs(self.vu) < 0.2:
             self._enter_hover(self._hold)
+            if self.run is not None:
+                self.task = "waypoint"  # a mission started on the ground
         return self._goto(n, e, u, HOLD_SPEED, VERTICAL_SPEED)
 
     def _fly_hover(self) -> tuple[float, float, float]:
@@ -1341,6 +1361,42 @@ class OsdkFcModel:
 
     def _item_control_device(self, now: float) -> dict[str, Any]:
         return {"device_status": 2 if self.sdk_control else 0, "flight_status": int(self.sdk_control)}
+
+    # what subscription topics read besides the flight-data items (subscription.SOURCE_ITEMS)
+    def _source_home(self, now: float) -> dict[str, Any]:
+        lat, lon = self.to_latlon(self.home_n, self.home_e)
+        return {"latitude": lat, "longitude": lon, "altitude": self.home_altitude, "set": 1}
+
+    def _source_aircraft(self, now: float) -> dict[str, Any]:
+        c, s = math.cos(math.radians(self.yaw)), math.sin(math.radians(self.yaw))
+        return {
+            "motors_on": int(self.motors_on),
+            "gimbal_mounted": 1,
+            "rtk_connected": 0,
+            "north": self.n - self.home_n,
+            "east": self.e - self.home_e,
+            "up": self.u,
+            "accel_x": self.an * c + self.ae * s,  # body FRD, plus the reaction to gravity an IMU reads
+            "accel_y": -self.an * s + self.ae * c,
+            "accel_z": -self.au - 9.80665,
+        }
+
+
+class _Sources(Mapping[str, Mapping[str, Any]]):
+    """The model's flight-data items and subscription sources at ``now``, read on demand."""
+
+    def __init__(self, model: OsdkFcModel, now: float) -> None:
+        self._model, self._now = model, now
+
+    def __getitem__(self, name: str) -> Mapping[str, Any]:
+        getter = getattr(self._model, f"_source_{name}", None) or self._model._items[name]
+        return getter(self._now)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter((*self._model._items, *sub.SOURCE_ITEMS))
+
+    def __len__(self) -> int:
+        return len(self._model._items) + len(sub.SOURCE_ITEMS)
 
 
 # Flight task codes (FLIGHT_TASKS) -> what the FC does; each returns the FLIGHT_TASK_ACK code.
