@@ -118,6 +118,11 @@ def test_table_keys_and_session_rules() -> None:
         ("arm", [1], [2]),
         ("kill_switch", [13], [2]),
         ("lost_authority_push", [1], [2]),
+        ("subscribe_verify", [4], [1]),
+        ("subscribe_add_package", [None], [1]),
+        ("subscribe_reset", [1], [1]),
+        ("subscribe_remove_package", [1], [1]),
+        ("subscription_data_push", [None], []),
     ],
 )
 def test_packed_sizes(name: str, sizes: list[int], ack_sizes: list[int | None]) -> None:
