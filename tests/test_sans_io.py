@@ -13,7 +13,7 @@ FORBIDDEN_STDLIB = {"socket", "threading", "asyncio", "select", "selectors", "su
 
 def _sans_io_modules() -> list[Path]:
     files = list((ROOT / "adapters" / "wire").glob("*.py"))
-    for pattern in ("protocol.py", "commands.py", "telemetry.py", "can.py"):
+    for pattern in ("protocol.py", "commands.py", "telemetry.py", "subscription.py", "can.py"):
         files += (ROOT / "adapters").glob(f"*/{pattern}")
     files.append(ROOT / "adapters" / "absence.py")  # what supervision says about an absent link
     return sorted(files)

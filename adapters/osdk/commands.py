@@ -1,6 +1,8 @@
 """Onboard SDK command tables: ground station (seed 004: waypoint, hotpoint, follow-me ``0x03``, mission
-pushes ``0x02 0x03`` / ``0x02 0x04``) and the activation, control and push commands of
-PROTOCOL-NOTES ("DJI Onboard SDK" sections), in ONE table keyed by ``(cmd_set, cmd_id)``.
+pushes ``0x02 0x03`` / ``0x02 0x04``), the activation, control and push commands of
+PROTOCOL-NOTES ("DJI Onboard SDK" sections) and the data subscription set ``0x0B`` with its push
+``0x02 0x05`` (layouts in ``subscription.py``, from DJI's Onboard-SDK 3.9.0), in ONE table keyed by
+``(cmd_set, cmd_id)``.
 
 Each key maps to one or more :class:`CommandSpec` (more than one only where the wire shares an id:
 ``0x01 0x03`` carries the 17-byte movement control, the 26-byte advanced form and its emergency-brake
@@ -25,8 +27,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from adapters.osdk import subscription as sub
 from adapters.osdk.protocol import SessionMode
+from adapters.osdk.subscription import ADD_PACKAGE, PACKAGE_DATA, PACKAGE_ID, RESET, SUBSCRIBE_ACK, VERIFY
 from adapters.osdk.telemetry import FlightDataCodec, check_firmware, examples_of
 from adapters.wire.bits import BitLayout, Bits
 from adapters.wire.layout import Field, Layout, LayoutError, PayloadCodec, Tail
@@ -833,7 +835,7 @@ _SPECS: tuple[CommandSpec, ...] = (
         doc="RC or mobile app took over: end DRC motion (joystick_invalid_notify reason 4)",
     ),
     CommandSpec(
-        "subscription_data_push", 0x02, 0x05, (sub.PACKAGE_DATA,), direction=FROM_FC,
+        "subscription_data_push", 0x02, 0x05, (PACKAGE_DATA,), direction=FROM_FC,
         session=SessionMode.NO_ACK, retries=0, firmware="new", section=_OSDK_SUB,
         doc="one subscribed package: u8 id + its topics' structs (subscription.decode_package)",
     ),
@@ -847,19 +849,19 @@ _SPECS: tuple[CommandSpec, ...] = (
     ),
     # ---- data subscription set 0x0B (firmware 3.3+; subscription.py), OSDK's timing: 500 ms x 2 / x 1
     CommandSpec(
-        "subscribe_verify", 0x0B, 0x00, (sub.VERIFY,), (U8_ACK,), sub.SUBSCRIBE_ACK, firmware="new",
+        "subscribe_verify", 0x0B, 0x00, (VERIFY,), (U8_ACK,), SUBSCRIBE_ACK, firmware="new",
         section=_OSDK_SUB, doc="match the topic database version (0x00000100)",
     ),
     CommandSpec(
-        "subscribe_add_package", 0x0B, 0x01, (sub.ADD_PACKAGE,), (U8_ACK,), sub.SUBSCRIBE_ACK, retries=1,
+        "subscribe_add_package", 0x0B, 0x01, (ADD_PACKAGE,), (U8_ACK,), SUBSCRIBE_ACK, retries=1,
         firmware="new", section=_OSDK_SUB, doc="start pushing package 0..4: its rate and topic UIDs",
     ),
     CommandSpec(
-        "subscribe_reset", 0x0B, 0x02, (sub.RESET,), (U8_ACK,), sub.SUBSCRIBE_ACK, retries=1,
+        "subscribe_reset", 0x0B, 0x02, (RESET,), (U8_ACK,), SUBSCRIBE_ACK, retries=1,
         firmware="new", section=_OSDK_SUB, doc="remove every package",
     ),
     CommandSpec(
-        "subscribe_remove_package", 0x0B, 0x03, (sub.PACKAGE_ID,), (U8_ACK,), sub.SUBSCRIBE_ACK, retries=1,
+        "subscribe_remove_package", 0x0B, 0x03, (PACKAGE_ID,), (U8_ACK,), SUBSCRIBE_ACK, retries=1,
         firmware="new", section=_OSDK_SUB, doc="stop one package",
     ),
     # ---- ground station set 0x03 (seed 004)
