@@ -111,6 +111,7 @@ class GatewayApp:
             on_connected=lambda: northbound_holder["nb"].on_connected(),
             inline=lambda t, p: northbound_holder["drc"].inline_main(t, p),
             on_disconnected=lambda reason: northbound_holder["drc"].main_link_lost(reason),
+            buffered=lambda name: name.endswith("/osd"),  # osd waits out an outage (bounded), in order
         )
         self.northbound = Northbound(
             settings=s,

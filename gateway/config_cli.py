@@ -43,12 +43,12 @@ NOTES: dict[str, str] = {
     "broker.password": "broker password: better `DJIGW_BROKER__PASSWORD`; never logged",
     "broker.protocol": "`5` (MQTT 5, session expiry) or `3.1.1` (persistent session)",
     "broker.keepalive": "MQTT keepalive (s)",
-    "broker.ca_file": "CA certificate for `mqtts://` / `wss://`",
+    "broker.ca_file": "CA certificate for `mqtts://` / `wss://` (checked before start: it must exist and load)",
     "broker.cert_file": "client certificate (mutual TLS)",
     "broker.key_file": "client certificate key",
     "broker.tls_hostname_check": "check the broker's certificate host name",
-    "broker.reconnect_min": "first reconnect delay (s); capped exponential backoff with jitter",
-    "broker.reconnect_max": "longest reconnect delay (s)",
+    "broker.reconnect_min": "after a loss the next node is tried within this (s, random); first refusal backoff",
+    "broker.reconnect_max": "longest backoff (s) for a broker that answers and refuses",
     "dispatcher.reply_cache_seconds": "a repeated `tid` is answered from this cache, not acted on twice",
     "dispatcher.event_retries": "events with `need_reply: 1` are re-sent this often until an `events_reply`",
     "dispatcher.event_retry_interval": "seconds between event re-sends",
@@ -232,10 +232,11 @@ def cmd_check_config(ns: argparse.Namespace) -> int:
     if not ns.file:
         print("dji-gateway check-config: give a config FILE (or --reference)", file=sys.stderr)
         return 2
-    from gateway.settings import ConfigError, load_settings
+    from gateway.settings import ConfigError, check_files, load_settings
 
     try:
         settings = load_settings(ns.file)
+        file_warnings = check_files(settings)  # every file it names, exactly as 'run' checks them
     except ConfigError as exc:
         print(f"dji-gateway: {exc}", file=sys.stderr)
         return 2
@@ -243,6 +244,8 @@ def cmd_check_config(ns: argparse.Namespace) -> int:
 
     for warning in warnings(type(settings)):
         print(f"warning: {warning}", file=sys.stderr)
+    for line in file_warnings:
+        print(f"warning: {line}", file=sys.stderr)
     print(json.dumps(resolved(settings), indent=2))
     kinds = ", ".join(f"{d.type} {d.sn}" for d in settings.devices) or "no devices"
     print(f"config ok: gateway {settings.gateway_sn}, {kinds}", file=sys.stderr)

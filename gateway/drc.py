@@ -374,7 +374,7 @@ class DrcController:
         host, _, port_text = broker.address.rpartition(":")
         host = host.strip("[]")
         main = self.settings.broker
-        dedicated = not ((host, int(port_text)) == (main.host, main.port) and broker.enable_tls == main.tls)
+        dedicated = not main.is_node(host, int(port_text), bool(broker.enable_tls))  # any node of the list
         secret = hashlib.sha256(broker.password.get_secret_value().encode()).hexdigest()
         key = (host, int(port_text), bool(broker.enable_tls), broker.client_id, broker.username, secret)
         link = ds.LinkSpec(key=key, dedicated=dedicated)

@@ -1,23 +1,36 @@
-"""The broker connection: owns paho-mqtt and its network thread, nothing else.
+"""The broker connection: owns paho-mqtt, its network thread and the thread that keeps it connected.
 
 Received messages are handed to the asyncio loop with ``call_soon_threadsafe`` and land in a
 bounded queue; when it is full the message is dropped, counted and logged, so a flood never
 blocks paho's thread (a blocked thread would delay every heartbeat and reply). Subscriptions are
 made in the connect callback every time, so a broker restart that forgot them is healed. The
 ``on_connected`` hook (``update_topo``, ``state``) runs in the loop after each (re)connect.
-Reconnects use capped exponential backoff with full jitter, so a fleet does not stampede a
-restarted broker. Knows topics only as strings; no Cloud API semantics.
+
+Threads: one *supervisor* per bridge (``mqtt-<name>``) finds a broker node and connects (TCP probes
+to every ``broker.url``, then paho's ``connect``), starts paho's network thread for that one
+connection, watches it (a connection whose data TCP keeps retransmitting is *stalled*) and, when it
+ends, asks :class:`gateway.broker_link.ReconnectPolicy` when and where to go next. paho's own
+reconnect is off: the policy decides (failover across nodes, probing, backoff, client-id takeover).
+QoS 1 messages published meanwhile wait in paho's queue and go out after the next CONNACK, on
+whichever node; osd (the topics ``buffered`` selects, QoS 0) waits in a bounded
+:class:`gateway.broker_link.OfflineBuffer` and is delivered in order after ``on_connected``.
+Knows topics only as strings; no Cloud API semantics.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import logging
+import os
 import random
+import select
 import socket
 import ssl
+import struct
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -27,12 +40,16 @@ from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
+from gateway.broker_link import Loss, OfflineBuffer, ReconnectPolicy
 from gateway.metrics import Metrics
-from gateway.settings import BrokerSettings
+from gateway.settings import BrokerEndpoint, BrokerSettings
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Backoff", "Inbound", "MqttBridge", "close_client"]
+__all__ = ["Inbound", "MqttBridge", "close_client", "tcp_stalled"]
+
+#: MQTT 5 DISCONNECT reason: another connection with the same client id took the session over.
+SESSION_TAKEN_OVER = 0x8E
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,25 +69,99 @@ def close_client(client: paho.Client) -> None:
         client._reset_sockets()  # private, but the only way; harmless when already closed
 
 
-class Backoff:
-    """Capped exponential backoff with full jitter (delay drawn from [0.5·d, d])."""
+def _raw_socket(sock: Any) -> socket.socket | None:
+    raw = getattr(sock, "_socket", sock)  # websockets wrap the socket
+    return raw if isinstance(raw, socket.socket) else None
 
-    def __init__(self, minimum: float, maximum: float, rng: random.Random | None = None) -> None:
-        self.minimum, self.maximum = minimum, max(minimum, maximum)
-        self._attempt = 0
-        self._rng = rng or random.Random()
 
-    def next(self) -> float:
-        ceiling = min(self.maximum, self.minimum * (2**self._attempt))
-        self._attempt = min(self._attempt + 1, 32)
-        return self._rng.uniform(ceiling / 2, ceiling)
+def tcp_stalled(sock: Any) -> bool:
+    """True when TCP has retransmitted the oldest unacknowledged segment at least twice without an
+    ACK (Linux ``TCP_INFO``: ``tcpi_retransmits`` ≥ 2 with data in flight): the path is down, or
+    was, and the connection now waits out a retransmission timer that doubles each time. False
+    where ``TCP_INFO`` does not exist."""
+    raw = _raw_socket(sock)
+    opt = getattr(socket, "TCP_INFO", None)
+    if raw is None or opt is None:
+        return False
+    try:
+        info = raw.getsockopt(socket.IPPROTO_TCP, opt, 104)
+    except OSError:
+        return False
+    if len(info) < 28:
+        return False
+    retransmits = info[2]
+    (unacked,) = struct.unpack_from("I", info, 24)
+    return retransmits >= 2 and unacked > 0
 
-    def reset(self) -> None:
-        self._attempt = 0
+
+class _Prober:
+    """Non-blocking TCP connects to broker nodes: a round launches one per node; :meth:`poll` reports
+    the nodes whose connect completed. Each probe lives ``timeout`` seconds. Only its own sockets."""
+
+    def __init__(self, endpoints: tuple[BrokerEndpoint, ...], timeout: float) -> None:
+        self.endpoints, self.timeout = endpoints, timeout
+        self._pending: list[tuple[float, int, socket.socket]] = []
+        self.errors: dict[int, str] = {}
+
+    def launch(self, now: float) -> None:
+        for index, ep in enumerate(self.endpoints):
+            try:
+                family, kind, proto, _, addr = socket.getaddrinfo(ep.host, ep.port, type=socket.SOCK_STREAM)[
+                    0
+                ]
+                sock = socket.socket(family, kind, proto)
+            except OSError as exc:
+                self.errors[index] = f"cannot resolve {ep.host}: {exc.strerror or exc}"
+                continue
+            sock.setblocking(False)
+            err = sock.connect_ex(addr)
+            if err in (0, errno.EINPROGRESS, errno.EWOULDBLOCK):
+                self._pending.append((now, index, sock))
+            else:
+                self.errors[index] = os.strerror(err)
+                sock.close()
+
+    def poll(self, now: float, timeout: float) -> set[int]:
+        """Wait up to ``timeout`` for probes to finish; the nodes that accepted a connection."""
+        answered: set[int] = set()
+        keep: list[tuple[float, int, socket.socket]] = []
+        for started, index, sock in self._pending:
+            if now - started > self.timeout:
+                self.errors[index] = "no answer (timed out)"
+                sock.close()
+            else:
+                keep.append((started, index, sock))
+        self._pending = keep
+        if not keep:
+            if timeout > 0:
+                time.sleep(timeout)
+            return answered
+        try:
+            _, writable, _ = select.select([], [s for _, _, s in keep], [], timeout)
+        except (OSError, ValueError):
+            writable = []
+        rest: list[tuple[float, int, socket.socket]] = []
+        for started, index, sock in keep:
+            if sock not in writable:
+                rest.append((started, index, sock))
+                continue
+            err = sock.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR)
+            if err == 0:
+                answered.add(index)
+            else:
+                self.errors[index] = os.strerror(err)
+            sock.close()
+        self._pending = rest
+        return answered
+
+    def close(self) -> None:
+        for _, _, sock in self._pending:
+            sock.close()
+        self._pending = []
 
 
 class MqttBridge:
-    """One paho client in its own thread, feeding an asyncio queue."""
+    """One paho client, kept connected to one of the configured broker nodes, feeding an asyncio queue."""
 
     def __init__(
         self,
@@ -85,11 +176,15 @@ class MqttBridge:
         name: str = "main",
         inline: Callable[[str, bytes], bool] | None = None,
         on_disconnected: Callable[[str], None] | None = None,
+        buffered: Callable[[str], bool] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        rng: random.Random | None = None,
     ) -> None:
         self.settings = settings
         self.client_id = client_id
         self.subscriptions = list(subscriptions)
         self.queue: asyncio.Queue[Inbound] = asyncio.Queue(maxsize=settings.inbound_queue)
+        self.endpoints = settings.endpoints
         self._loop = loop
         self._metrics = metrics
         self._on_connected = on_connected
@@ -97,15 +192,38 @@ class MqttBridge:
         # DRC heartbeats and sticks are answered there, so a busy event loop cannot delay them.
         self._inline = inline
         self._on_disconnected = on_disconnected
+        self._buffered = buffered  # QoS 0 topics kept in the offline buffer (osd); None: none
         self._name = name
-        self._backoff = Backoff(settings.reconnect_min, settings.reconnect_max)
+        self._clock = clock
+        self.policy = ReconnectPolicy(
+            len(self.endpoints),
+            reconnect_min=settings.reconnect_min,
+            reconnect_max=settings.reconnect_max,
+            probe_interval=settings.probe_interval,
+            takeover_backoff_max=settings.takeover_backoff_max,
+            protocol_v5=settings.protocol == "5",
+            rng=rng,
+        )
+        self._buffer = OfflineBuffer(settings.telemetry_buffer, settings.telemetry_buffer_age)
+        self._buffer_lock = threading.Lock()
+        self._drops_counted = (0, 0)
         self._connected = asyncio.Event()
         self._subscribed = threading.Event()  # set once the broker acknowledged every subscription
         self._sub_mid: int | None = None
         self._dropped_logged = 0
         self.last_refusal: str | None = None  # the broker's reason for refusing the last CONNECT
         self.last_error: str | None = None  # why the last connection attempt failed (TCP/TLS), if known
-        self._diagnosed = False
+        self.current: BrokerEndpoint | None = None  # the node of the current (or last) connection
+        self.stalled = False  # connected, but TCP keeps retransmitting: telemetry goes to the buffer
+        self._stop = threading.Event()
+        self._done = threading.Event()  # the current connection ended (paho's on_disconnect)
+        self._connack = threading.Event()
+        self._refused = False
+        self._aborting = False
+        self._loss = Loss.CLOSED
+        self._session_live = False  # CONNACK accepted on the current connection
+        self._failing_since: float | None = None  # first failed attempt of the current streak
+        self._supervisor: threading.Thread | None = None
         self._ssl: ssl.SSLContext | None = None
         self._client = self._build_client(will)
 
@@ -119,7 +237,7 @@ class MqttBridge:
             protocol=MQTTProtocolVersion.MQTTv5 if v5 else MQTTProtocolVersion.MQTTv311,
             transport=s.transport,
             clean_session=None if v5 else False,
-            reconnect_on_failure=True,
+            reconnect_on_failure=False,  # the supervisor decides when and where (failover, takeover)
         )
         if s.transport == "websockets":
             client.ws_set_options(path=s.ws_path)
@@ -131,10 +249,9 @@ class MqttBridge:
         if will is not None:
             client.will_set(will[0], will[1], qos=1, retain=False)
         client.max_queued_messages_set(10000)
-        client.reconnect_delay_set(s.reconnect_min, s.reconnect_min)
+        client.connect_timeout = s.connect_timeout
         client.on_connect = self._on_connect
         client.on_disconnect = self._on_disconnect
-        client.on_connect_fail = self._on_connect_fail
         client.on_message = self._on_message
         client.on_subscribe = self._on_subscribe
         client.on_socket_open = self._on_socket_open
@@ -153,39 +270,14 @@ class MqttBridge:
         ctx.check_hostname = s.tls_hostname_check
         return ctx
 
-    def _diagnose(self) -> None:
-        """paho reports a failed connect without its cause; find it with one probe (TCP, then TLS) and
-        log one clear line per streak of failures. Runs in its own short-lived thread."""
-        s = self.settings
-        try:
-            with socket.create_connection((s.host, s.port), timeout=3) as sock:
-                if self._ssl is not None:
-                    with self._ssl.wrap_socket(sock, server_hostname=s.host):
-                        pass
-            reason = "TCP/TLS works, but the MQTT connection failed"
-        except ssl.SSLCertVerificationError as exc:
-            reason = f"TLS: the broker's certificate was refused: {exc.verify_message}"
-        except ssl.SSLError as exc:
-            reason = f"TLS handshake failed: {exc.reason or exc}"
-        except OSError as exc:
-            reason = f"cannot connect: {exc.strerror or exc}"
-        self.last_error = reason
-        log.error("broker %s (%s): %s", self._where(), self._name, reason)
-
     def set_will(self, topic: str, payload: bytes) -> None:
         """The message the broker publishes if the gateway vanishes (must precede :meth:`start`)."""
         self._client.will_set(topic, payload, qos=1, retain=False)
 
     def start(self) -> None:
-        s = self.settings
-        props = None
-        kwargs: dict[str, Any] = {}
-        if s.protocol == "5":
-            props = Properties(PacketTypes.CONNECT)
-            props.SessionExpiryInterval = s.session_expiry
-            kwargs["clean_start"] = paho.MQTT_CLEAN_START_FIRST_ONLY
-        self._client.connect_async(s.host, s.port, keepalive=s.keepalive, properties=props, **kwargs)
-        self._client.loop_start()
+        self._stop.clear()
+        self._supervisor = threading.Thread(target=self._supervise, name=f"mqtt-{self._name}", daemon=True)
+        self._supervisor.start()
 
     async def wait_connected(self, timeout: float | None = None) -> bool:
         try:
@@ -198,9 +290,31 @@ class MqttBridge:
     def connected(self) -> bool:
         return self._client.is_connected()
 
+    @property
+    def takeover_suspected(self) -> bool:
+        """Another client seems to use our client id (see :class:`gateway.broker_link.ReconnectPolicy`)."""
+        return self.policy.takeover_suspected
+
+    @property
+    def buffered(self) -> int:
+        """Telemetry messages waiting in the offline buffer."""
+        return len(self._buffer)
+
     def publish(self, topic: str, payload: bytes, qos: int = 1, retain: bool = False) -> bool:
         """Queue a message; paho writes it from this thread at once when connected. QoS 1 messages
-        published while disconnected wait in paho's queue and go out after the reconnect."""
+        published while disconnected wait in paho's queue and go out after the reconnect; osd (the
+        ``buffered`` topics) waits in the offline buffer while the link is down or stalled."""
+        if qos == 0 and self._buffered is not None and self._buffered(topic):
+            with self._buffer_lock:
+                if self.stalled or not self.connected or len(self._buffer):
+                    self._buffer.add(self._clock(), topic, payload)
+                    self._count_buffer()
+                    if not self.stalled and self.connected:
+                        self._flush_locked()
+                    return True
+        return self._send(topic, payload, qos, retain)
+
+    def _send(self, topic: str, payload: bytes, qos: int, retain: bool) -> bool:
         info = self._client.publish(topic, payload, qos=qos, retain=retain)
         ok = info.rc == paho.MQTT_ERR_SUCCESS or (qos > 0 and info.rc == paho.MQTT_ERR_NO_CONN)
         if not ok:
@@ -209,8 +323,40 @@ class MqttBridge:
             self._metrics.inc("mqtt_messages_out_total", link=self._name)
         return ok
 
+    def flush(self) -> int:
+        """Send what the offline buffer holds, oldest first (after a reconnect); the number sent."""
+        with self._buffer_lock:
+            return self._flush_locked()
+
+    def _flush_locked(self) -> int:
+        if self.stalled or not self.connected:
+            return 0
+        items = self._buffer.take(self._clock())
+        for n, (_, topic, payload) in enumerate(items):
+            info = self._client.publish(topic, payload, qos=0)
+            if info.rc != paho.MQTT_ERR_SUCCESS:  # the link dropped again: keep the rest, in order
+                self._buffer.put_back(items[n:])
+                self._count_buffer()
+                return n
+            self._metrics.inc("mqtt_messages_out_total", link=self._name)
+        if items:
+            self._metrics.inc("telemetry_delivered_late_total", len(items), link=self._name)
+        self._count_buffer()
+        return len(items)
+
+    def _count_buffer(self) -> None:
+        overflow, age = self._buffer.dropped_overflow, self._buffer.dropped_age
+        before_overflow, before_age = self._drops_counted
+        if overflow > before_overflow:
+            self._metrics.inc("telemetry_dropped_total", overflow - before_overflow, reason="overflow")
+        if age > before_age:
+            self._metrics.inc("telemetry_dropped_total", age - before_age, reason="age")
+        self._drops_counted = (overflow, age)
+        self._metrics.set("telemetry_buffered", len(self._buffer), link=self._name)
+
     def stop(self, last: tuple[str, bytes] | None = None, timeout: float = 2.0) -> None:
         """Publish ``last`` (the clean offline message), wait for it briefly, disconnect."""
+        self._stop.set()
         if last is not None and self._client.is_connected():
             info = self._client.publish(last[0], last[1], qos=1)
             try:
@@ -218,39 +364,267 @@ class MqttBridge:
             except (RuntimeError, ValueError):
                 log.warning("offline message not delivered before shutdown")
         self._client.disconnect()
+        if self._supervisor is not None:
+            self._supervisor.join(timeout + self.settings.connect_timeout + 2)
+            self._supervisor = None
         self._client.loop_stop()
         close_client(self._client)
 
+    # -- the supervisor thread ------------------------------------------------------------------
+    def _supervise(self) -> None:
+        at = self._clock()
+        while not self._stop.is_set():
+            try:
+                index = self._find_broker(at)
+                if index is None:
+                    return
+                at = self._session(index)
+            except Exception:  # never let the thread die: the gateway would stay offline for good
+                self._metrics.inc("handler_exceptions_total", where=f"mqtt-supervisor:{self._name}")
+                log.exception("broker supervisor (%s) failed; retrying", self._name)
+                at = self._clock() + self.settings.reconnect_max
+
+    def _sleep_until(self, at: float) -> bool:
+        """Wait until ``at`` on the bridge's clock; False when stopping."""
+        while not self._stop.is_set():
+            left = at - self._clock()
+            if left <= 0:
+                return True
+            self._stop.wait(min(left, 0.5))
+        return False
+
+    def _find_broker(self, start_at: float) -> int | None:
+        """Probe every node from ``start_at`` until one accepts a TCP connection; its index."""
+        if not self._sleep_until(start_at):
+            return None
+        prober = _Prober(self.endpoints, self.settings.connect_timeout)
+        next_round = self._clock()
+        rounds = 0
+        try:
+            while not self._stop.is_set():
+                now = self._clock()
+                if now >= next_round:
+                    if rounds == 1 or (rounds and rounds % 600 == 0):
+                        self._report_unreachable(prober.errors)
+                    prober.launch(now)
+                    rounds += 1
+                    next_round = self.policy.next_round(now)
+                answered = prober.poll(now, max(0.0, min(0.1, next_round - now)))
+                if answered:
+                    return self.policy.choose(answered)
+            return None
+        finally:
+            prober.close()
+
+    def _report_unreachable(self, errors: dict[int, str]) -> None:
+        if self._failing_since is None:
+            self._failing_since = self._clock()
+        parts = [f"{self.endpoints[i].where()}: {why}" for i, why in sorted(errors.items())]
+        reason = "cannot connect: " + ("; ".join(parts) if parts else "no answer")
+        self.last_error = reason
+        self._metrics.inc("mqtt_connect_failures_total", link=self._name)
+        log.error(
+            "broker (%s): %s; probing every %.2g s",
+            self._name,
+            reason,
+            self.settings.probe_interval,
+        )
+
+    def _connect_kwargs(self) -> dict[str, Any]:
+        s = self.settings
+        kwargs: dict[str, Any] = {"keepalive": s.keepalive}
+        if s.protocol == "5":
+            props = Properties(PacketTypes.CONNECT)
+            props.SessionExpiryInterval = s.session_expiry
+            kwargs["properties"] = props
+            kwargs["clean_start"] = paho.MQTT_CLEAN_START_FIRST_ONLY
+        return kwargs
+
+    def _session(self, index: int) -> float:
+        """Connect to node ``index``, keep the connection until it ends; when to look for a broker next."""
+        ep = self.endpoints[index]
+        client = self._client
+        self.current = ep
+        self._done.clear()
+        self._connack.clear()
+        self._refused = False
+        self._aborting = False
+        self._loss = Loss.CLOSED
+        self._session_live = False
+        # while connect() runs in this thread, publishers elsewhere only queue their packets (paho writes
+        # directly from the caller when it has no network thread: it could write before the CONNECT)
+        client._thread = threading.current_thread()  # private, restored below; see the comment above
+        try:
+            client.connect(ep.host, ep.port, **self._connect_kwargs())
+        except ssl.SSLCertVerificationError as exc:
+            return self._attempt_failed(
+                ep, f"TLS: the broker's certificate was refused: {exc.verify_message}"
+            )
+        except ssl.SSLError as exc:
+            return self._attempt_failed(ep, f"TLS handshake failed: {exc.reason or exc}")
+        except OSError as exc:  # the node went away between the probe and the connect
+            self.last_error = f"cannot connect: {exc.strerror or exc}"
+            self._metrics.inc("mqtt_connect_failures_total", link=self._name)
+            return self.policy.next_round(self._clock())
+        finally:
+            client._thread = None
+        client.loop_start()
+        try:
+            return self._run_connection(ep)
+        finally:
+            client.loop_stop()
+            client._reset_sockets(sockpair_only=True)  # loop_start makes a new wake-up pair each time
+            self.stalled = False
+
+    def _attempt_failed(self, ep: BrokerEndpoint, reason: str) -> float:
+        """The broker answered TCP but the connection failed (TLS, CONNACK): back off."""
+        self._metrics.inc("mqtt_connect_failures_total", link=self._name)
+        if reason != self.last_error:
+            log.error("broker %s (%s): %s", ep.where(), self._name, reason)
+        self.last_error = reason
+        with contextlib.suppress(Exception):
+            self._client._sock_close()
+        return self.policy.refused(self._clock())
+
+    def _run_connection(self, ep: BrokerEndpoint) -> float:
+        deadline = self._clock() + self.settings.connect_timeout
+        while not (self._connack.is_set() or self._done.is_set() or self._stop.is_set()):
+            if self._clock() > deadline:
+                self._abort()
+                return self._attempt_failed(ep, "no CONNACK within connect_timeout")
+            self._connack.wait(0.05)
+        if self._stop.is_set():
+            self._wait_done()
+            return self._clock()
+        if self._refused or not self._connack.is_set():
+            self._wait_done()
+            return self.policy.refused(self._clock())
+        connected_at = self._clock()
+        self.policy.connected(connected_at, self.endpoints.index(ep))
+        self._watch(ep)
+        if self._stop.is_set():
+            return self._clock()
+        now = self._clock()
+        was_suspected = self.policy.takeover_suspected
+        at = self.policy.lost(now, lasted=now - connected_at, how=self._loss)
+        if self.policy.takeover_suspected and not was_suspected:
+            self._report_takeover()
+        elif self.policy.takeover_suspected:
+            self._metrics.inc("mqtt_takeovers_total", link=self._name)
+        return at
+
+    def _report_takeover(self) -> None:
+        self._metrics.inc("mqtt_takeovers_total", link=self._name)
+        self._metrics.set("mqtt_client_id_conflict", 1, link=self._name)
+        how = (
+            "the broker said the session was taken over (0x8E)"
+            if self._loss is Loss.TAKEN_OVER
+            else "the broker keeps closing the connection right after accepting it"
+        )
+        log.error(
+            "broker (%s): another client with client id %r took over the connection: %s. Likely cause: "
+            "two gateways with the same gateway_sn or broker.client_id (or a second copy of this one). "
+            "Backing off (up to %.0f s); fix the duplicate",
+            self._name,
+            self.client_id,
+            how,
+            self.settings.takeover_backoff_max,
+        )
+
+    def _watch(self, ep: BrokerEndpoint) -> None:
+        """Until the connection ends: every 50 ms look for a stall; while stalled, probe the nodes and
+        drop the connection when one answers (the network is back, TCP's timer is not)."""
+        prober: _Prober | None = None
+        next_round = 0.0
+        try:
+            while not self._done.wait(0.05):
+                if self._stop.is_set():
+                    self._wait_done()
+                    return
+                stuck = tcp_stalled(self._client.socket())
+                now = self._clock()
+                if stuck and not self.stalled:
+                    self.stalled = True
+                    self._metrics.inc("mqtt_stalls_total", link=self._name)
+                    log.warning("broker %s (%s): connection stalled; probing", ep.where(), self._name)
+                    prober, next_round = _Prober(self.endpoints, self.settings.connect_timeout), now
+                elif not stuck and self.stalled:
+                    self.stalled = False
+                    log.info("broker %s (%s): the stalled connection recovered", ep.where(), self._name)
+                    if prober is not None:
+                        prober.close()
+                        prober = None
+                    self._in_loop(self.flush)
+                if prober is not None:
+                    if now >= next_round:
+                        prober.launch(now)
+                        next_round = self.policy.next_round(now)
+                    if prober.poll(now, 0.0):
+                        log.warning("broker (%s): a node answers again: dropping the stalled connection",
+                                    self._name)  # fmt: skip
+                        self._loss = Loss.STALLED
+                        self._abort()
+                        self._wait_done()
+                        return
+        finally:
+            if prober is not None:
+                prober.close()
+
+    def _abort(self) -> None:
+        """Drop the connection without a DISCONNECT (it is stuck or never answered): paho's thread sees
+        the socket end and reports the loss."""
+        self._aborting = True
+        raw = _raw_socket(self._client.socket())
+        if raw is not None:
+            with contextlib.suppress(OSError):
+                socket.socket.shutdown(raw, socket.SHUT_RDWR)  # the plain socket's, also under TLS
+
+    def _wait_done(self) -> None:
+        if not self._done.wait(self.settings.connect_timeout):
+            log.warning("broker (%s): the network thread did not end the connection in time", self._name)
+
+    def _in_loop(self, fn: Callable[[], Any]) -> None:
+        with contextlib.suppress(RuntimeError):  # the loop closed during shutdown
+            self._loop.call_soon_threadsafe(fn)
+
     # -- paho callbacks (network thread) --------------------------------------------------------
     def _on_socket_open(self, client: paho.Client, userdata: Any, sock: Any) -> None:
-        raw = getattr(sock, "_socket", sock)  # websockets wrap the socket
+        raw = _raw_socket(sock)
         try:
+            if raw is None:
+                raise AttributeError("no socket")
             raw.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         except (OSError, AttributeError):
-            log.debug("could not set TCP_NODELAY on %r", type(raw).__name__)
+            log.debug("could not set TCP_NODELAY on %r", type(sock).__name__)
 
     def _on_connect(self, client: paho.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
         if reason.is_failure:
             self.last_refusal = str(reason)
+            self._refused = True
             self._metrics.inc("mqtt_connect_refused_total", link=self._name)
             log.error("broker %s refused the connection: %s", self._where(), reason)
-            self._schedule_retry()
+            self._connack.set()
             return
-        self._backoff.reset()
-        self._diagnosed = False
+        self._session_live = True
         self.last_error = None
-        client.reconnect_delay_set(self.settings.reconnect_min, self.settings.reconnect_min)
+        self.last_refusal = None
+        if self._failing_since is not None:
+            log.info("broker reachable again after %.1f s", self._clock() - self._failing_since)
+            self._failing_since = None
         self._subscribed.clear()
         if self.subscriptions:
             _, self._sub_mid = client.subscribe(list(self.subscriptions))
         self._metrics.inc("mqtt_connects_total", link=self._name)
         self._metrics.set("mqtt_connected", 1, link=self._name)
+        if not self.policy.takeover_suspected:
+            self._metrics.set("mqtt_client_id_conflict", 0, link=self._name)
         log.info(
             "connected to %s (%s), subscribed to %d topics",
             self._where(),
             self._name,
             len(self.subscriptions),
         )
+        self._connack.set()
         self._loop.call_soon_threadsafe(self._after_connect)
 
     def _on_subscribe(self, client: paho.Client, userdata: Any, mid: int, reasons: Any, props: Any) -> None:
@@ -270,27 +644,22 @@ class MqttBridge:
     def _on_disconnect(self, client: paho.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
         self._subscribed.clear()
         self._metrics.set("mqtt_connected", 0, link=self._name)
-        self._loop.call_soon_threadsafe(self._connected.clear)
-        if reason.is_failure:
+        with contextlib.suppress(RuntimeError):
+            self._loop.call_soon_threadsafe(self._connected.clear)
+        if getattr(reason, "value", None) == SESSION_TAKEN_OVER:
+            self._loss = Loss.TAKEN_OVER
+        elif self._aborting and self._loss is not Loss.STALLED:
+            self._loss = Loss.CLOSED
+        if reason.is_failure and self._session_live:
             self._metrics.inc("mqtt_disconnects_total", link=self._name)
-            log.warning("lost broker %s: %s; reconnecting", self._where(), reason)
+            log.warning("lost broker %s (%s): %s", self._where(), self._name, reason)
             if self._on_disconnected is not None:
                 try:
                     self._on_disconnected(str(reason))
                 except Exception:
                     log.exception("disconnect hook failed")
-        self._schedule_retry()
-
-    def _on_connect_fail(self, client: paho.Client, userdata: Any) -> None:
-        self._metrics.inc("mqtt_connect_failures_total", link=self._name)
-        if not self._diagnosed:
-            self._diagnosed = True
-            threading.Thread(target=self._diagnose, name=f"mqtt-diagnose-{self._name}", daemon=True).start()
-        self._schedule_retry()
-
-    def _schedule_retry(self) -> None:
-        delay = self._backoff.next()
-        self._client.reconnect_delay_set(delay, delay)
+        self._session_live = False
+        self._done.set()
 
     def _on_message(self, client: paho.Client, userdata: Any, msg: paho.MQTTMessage) -> None:
         if self._inline is not None:
@@ -319,6 +688,7 @@ class MqttBridge:
             except Exception:
                 self._metrics.inc("handler_exceptions_total", where="on_connected")
                 log.exception("on_connected hook failed")
+        self.flush()  # after update_topo and state: the cloud registers the gateway before its osd
 
     def _enqueue(self, item: Inbound) -> None:
         self._metrics.inc("mqtt_messages_in_total", link=self._name)
@@ -331,5 +701,5 @@ class MqttBridge:
                 log.warning("inbound queue full: dropped %d message(s) so far", self._dropped_logged)
 
     def _where(self) -> str:
-        s = self.settings
-        return f"{s.host}:{s.port}"
+        ep = self.current or self.endpoints[0]
+        return ep.where()

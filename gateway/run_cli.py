@@ -74,7 +74,12 @@ def simulated_settings(base: dict[str, Any]) -> dict[str, Any]:
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     run = sub.add_parser("run", help="run the gateway service")
     run.add_argument("--config", "-c", help="TOML config file (DJIGW_* environment variables override it)")
-    run.add_argument("--broker", help="broker URL, overrides the config (mqtt://host:port, mqtts://, ws://)")
+    run.add_argument(
+        "--broker",
+        action="append",
+        help="broker URL, overrides the config (mqtt://host:port, mqtts://, ws://); repeat it for the "
+        "nodes of a cluster (the first that answers is used, the next on loss)",
+    )
     run.add_argument("--simulate", action="store_true", help="add in-process simulated devices")
     run.add_argument("--gateway-sn", help="gateway serial number, overrides the config")
     run.add_argument("--log-json", action="store_true", help="one JSON object per log line")
@@ -95,7 +100,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 def _settings_from(ns: argparse.Namespace) -> GatewaySettings:
     overrides: dict[str, Any] = {}
     if ns.broker:
-        overrides["broker"] = {"url": ns.broker}
+        overrides["broker"] = {"url": ns.broker[0] if len(ns.broker) == 1 else list(ns.broker)}
     if ns.gateway_sn:
         overrides["gateway_sn"] = ns.gateway_sn
     if ns.log_json:
@@ -124,8 +129,11 @@ def _settings_from(ns: argparse.Namespace) -> GatewaySettings:
 
 
 def cmd_run(ns: argparse.Namespace) -> int:
+    from gateway.settings import check_files
+
     try:
         settings = _settings_from(ns)
+        file_warnings = check_files(settings)  # before anything starts: exit 2, not a traceback
     except ConfigError as exc:
         print(f"dji-gateway: {exc}", file=sys.stderr)
         return 2
@@ -137,6 +145,8 @@ def cmd_run(ns: argparse.Namespace) -> int:
 
     for warning in warnings(GatewaySettings):  # a misspelt DJIGW_* variable would be ignored silently
         log.warning("%s", warning)
+    for line in file_warnings:
+        log.warning("%s", line)
     return asyncio.run(_run(settings, simulate=ns.simulate))
 
 

@@ -8,6 +8,7 @@ and are ``SecretStr`` so they never reach a log line or an error message. No imp
 from __future__ import annotations
 
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 from urllib.parse import urlsplit
@@ -30,6 +31,7 @@ from adapters.rsdk.config import RsdkDeviceSettings
 from schemas.status import MAX_SUB_DEVICES
 
 __all__ = [
+    "BrokerEndpoint",
     "BrokerSettings",
     "ConfigError",
     "DispatcherSettings",
@@ -48,10 +50,50 @@ class ConfigError(ValueError):
     """A configuration that cannot run; the message is one line naming the field."""
 
 
+_DEFAULT_PORTS = {"mqtt": 1883, "tcp": 1883, "mqtts": 8883, "ssl": 8883, "ws": 80, "wss": 443}
+
+
+@dataclass(frozen=True, slots=True)
+class BrokerEndpoint:
+    """One broker node, from one ``broker.url`` entry."""
+
+    url: str
+    host: str
+    port: int
+    transport: Literal["tcp", "websockets"]
+    tls: bool
+    ws_path: str
+
+    @classmethod
+    def parse(cls, url: str) -> BrokerEndpoint:
+        parts = urlsplit(url)
+        if parts.scheme not in _DEFAULT_PORTS:
+            raise ValueError(f"{url!r}: scheme must be mqtt://, mqtts://, ws:// or wss://")
+        if not parts.hostname:
+            raise ValueError(f"{url!r}: missing host")
+        try:
+            port = parts.port or _DEFAULT_PORTS[parts.scheme]
+        except ValueError:
+            raise ValueError(f"{url!r}: bad port") from None
+        return cls(
+            url=url,
+            host=parts.hostname,
+            port=port,
+            transport="websockets" if parts.scheme in {"ws", "wss"} else "tcp",
+            tls=parts.scheme in {"mqtts", "wss", "ssl"},
+            ws_path=parts.path or "/mqtt",
+        )
+
+    def where(self) -> str:
+        return f"{self.host}:{self.port}"
+
+
 class BrokerSettings(BaseModel):
     model_config = _STRICT
-    url: str = Field(
-        "mqtt://127.0.0.1:1883", description="mqtt://, mqtts://, ws:// or wss:// host:port[/path]"
+    url: str | list[str] = Field(
+        "mqtt://127.0.0.1:1883",
+        description="mqtt://, mqtts://, ws:// or wss:// host:port[/path]; or a list of them (the nodes of "
+        "one cluster): the gateway uses the first that answers and moves to the next on loss",
     )
     username: str | None = None
     password: SecretStr | None = None
@@ -67,6 +109,26 @@ class BrokerSettings(BaseModel):
     )
     reconnect_min: float = Field(0.5, gt=0, le=60)
     reconnect_max: float = Field(30.0, gt=0, le=600)
+    probe_interval: float = Field(
+        0.5,
+        ge=0.05,
+        le=60,
+        description="while no broker answers, a TCP probe of every url this often (jittered to ½–1×): "
+        "the gateway is back about this long after the broker or the network is",
+    )
+    connect_timeout: float = Field(5.0, gt=0, le=60, description="TCP + TLS + CONNACK of one attempt (s)")
+    takeover_backoff_max: float = Field(
+        120.0,
+        ge=30,
+        le=3600,
+        description="another client took our client id: reconnect after 2 s, doubling up to this (s)",
+    )
+    telemetry_buffer: int = Field(
+        1000, ge=0, description="osd messages kept while the broker is unreachable; the oldest go first"
+    )
+    telemetry_buffer_age: float = Field(
+        300.0, gt=0, description="buffered osd older than this (s) is dropped, not delivered"
+    )
     inbound_queue: int = Field(
         1000, ge=10, description="received messages held for the loop; more are dropped"
     )
@@ -74,36 +136,49 @@ class BrokerSettings(BaseModel):
 
     @field_validator("url")
     @classmethod
-    def _url(cls, v: str) -> str:
-        parts = urlsplit(v)
-        if parts.scheme not in {"mqtt", "mqtts", "ws", "wss", "tcp", "ssl"}:
-            raise ValueError("scheme must be mqtt://, mqtts://, ws:// or wss://")
-        if not parts.hostname:
-            raise ValueError("missing host")
+    def _url(cls, v: str | list[str]) -> str | list[str]:
+        urls = [v] if isinstance(v, str) else list(v)
+        if not urls:
+            raise ValueError("give at least one broker url")
+        endpoints = [BrokerEndpoint.parse(u) for u in urls]
+        if len({(e.transport, e.tls) for e in endpoints}) > 1:
+            raise ValueError("every broker url must use the same scheme (all mqtt://, all mqtts:// …)")
+        if len({(e.host, e.port) for e in endpoints}) != len(endpoints):
+            raise ValueError("a broker url is listed twice")
         return v
 
     @property
+    def urls(self) -> tuple[str, ...]:
+        return (self.url,) if isinstance(self.url, str) else tuple(self.url)
+
+    @property
+    def endpoints(self) -> tuple[BrokerEndpoint, ...]:
+        return tuple(BrokerEndpoint.parse(u) for u in self.urls)
+
+    # the first node's view, for the callers that take one broker (the console, DRC's dedicated links)
+    @property
     def transport(self) -> Literal["tcp", "websockets"]:
-        return "websockets" if urlsplit(self.url).scheme in {"ws", "wss"} else "tcp"
+        return self.endpoints[0].transport
 
     @property
     def tls(self) -> bool:
-        return urlsplit(self.url).scheme in {"mqtts", "wss", "ssl"}
+        return self.endpoints[0].tls
 
     @property
     def host(self) -> str:
-        return urlsplit(self.url).hostname or ""
+        return self.endpoints[0].host
 
     @property
     def port(self) -> int:
-        parts = urlsplit(self.url)
-        if parts.port:
-            return parts.port
-        return {"mqtt": 1883, "tcp": 1883, "mqtts": 8883, "ssl": 8883, "ws": 80, "wss": 443}[parts.scheme]
+        return self.endpoints[0].port
 
     @property
     def ws_path(self) -> str:
-        return urlsplit(self.url).path or "/mqtt"
+        return self.endpoints[0].ws_path
+
+    def is_node(self, host: str, port: int, tls: bool) -> bool:
+        """Whether ``host:port`` is one of the configured nodes (DRC on "the main broker")."""
+        return any((e.host, e.port, e.tls) == (host, port, tls) for e in self.endpoints)
 
 
 class DispatcherSettings(BaseModel):
@@ -226,3 +301,67 @@ def load_settings(path: Path | str | None = None, **overrides: Any) -> GatewaySe
         return GatewaySettings(**doc)
     except ValidationError as exc:
         raise ConfigError(_one_line(exc)) from None
+
+
+def _is_path(url: str) -> bool:
+    """A serial ``url`` that names a file (``/dev/ttyUSB0``, ``./pty``), not a pyserial URL (``socket://``)."""
+    return "://" not in url and url != ""
+
+
+def check_files(settings: GatewaySettings) -> list[str]:
+    """Check every file the settings name before anything starts.
+
+    TLS files (``broker.ca_file``, ``cert_file``, ``key_file``) must exist, be readable and load: a
+    :class:`ConfigError` names the key and the file. A serial device given as a path is checked too, but
+    only refused when it exists and is not a character device (a directory, a regular file): a device
+    that is not plugged in yet is not an error (it comes online when it appears), so it is returned
+    as a warning line instead."""
+    import ssl
+    import stat
+
+    b = settings.broker
+    for key in ("ca_file", "cert_file", "key_file"):
+        path = getattr(b, key)
+        if path is None:
+            continue
+        where = f"config error at broker.{key}: {path}"
+        if not path.exists():
+            raise ConfigError(f"{where}: not found")
+        if not path.is_file():
+            raise ConfigError(f"{where}: not a file")
+        try:
+            path.read_bytes()
+        except OSError as exc:
+            raise ConfigError(f"{where}: cannot be read ({exc.strerror})") from None
+    if b.key_file is not None and b.cert_file is None:
+        raise ConfigError("config error at broker.key_file: given without broker.cert_file")
+    try:
+        if b.ca_file is not None:
+            ssl.create_default_context(cafile=str(b.ca_file))
+    except (ssl.SSLError, ValueError) as exc:
+        raise ConfigError(
+            f"config error at broker.ca_file: {b.ca_file}: not a PEM CA certificate ({exc})"
+        ) from None
+    if b.cert_file is not None:
+        try:
+            ssl.create_default_context().load_cert_chain(
+                str(b.cert_file), str(b.key_file) if b.key_file else None
+            )
+        except (ssl.SSLError, ValueError) as exc:
+            raise ConfigError(
+                f"config error at broker.cert_file: {b.cert_file}: certificate and key do not load ({exc})"
+            ) from None
+    warnings: list[str] = []
+    for i, device in enumerate(settings.devices):
+        url = getattr(device, "url", None)
+        if not isinstance(url, str) or not _is_path(url):
+            continue
+        path = Path(url)
+        where = f"devices[{i}].url: {url}"
+        if not path.exists():
+            warnings.append(f"{where}: not present (yet): the device comes online when it appears")
+            continue
+        mode = path.stat().st_mode
+        if not stat.S_ISCHR(mode):
+            raise ConfigError(f"config error at {where}: not a serial device (a character device or pty)")
+    return warnings
