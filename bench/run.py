@@ -115,6 +115,7 @@ SUITES: list[tuple[str, Suite]] = [
     ("scale", _lazy("bench.scale")),
     ("fleet", _lazy("bench.fleet")),
     ("restarts", _lazy("bench.restarts")),
+    ("resume", _lazy("bench.resume")),
     ("soak", _lazy("bench.soak")),
 ]
 #: suites timed inside this one process, pinned to one CPU. The others run brokers, gateways and
