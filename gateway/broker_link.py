@@ -17,9 +17,10 @@ Theory of operation. :class:`gateway.mqtt.MqttBridge` owns the sockets and paho;
 * **Backoff for a broker that answers and refuses** (CONNACK refused, TLS refused, no CONNACK, closed
   at once): capped exponential with jitter, ``reconnect_min`` doubling up to ``reconnect_max``. Probing
   does not shorten it: hammering a broker that refuses helps no one.
-* **Client-id takeover**: an MQTT 5 disconnect with reason 0x8E (session taken over), or on MQTT 3.1.1
+* **Client-id takeover**: an MQTT 5 disconnect with reason 0x8E (session taken over), or
   :data:`TAKEOVER_STREAK` connections in a row closed by the broker within :data:`SHORT_LIVED` seconds
-  of their CONNACK: another client uses the same id. Backoff doubles from :data:`TAKEOVER_FIRST` to
+  of their CONNACK (MQTT 3.1.1 has no reason to give; mosquitto 2.0 closes an MQTT 5 connection that is
+  taken over without one too): another client uses the same id. Backoff doubles from :data:`TAKEOVER_FIRST` to
   ``takeover_backoff_max`` (≥ 30 s); the suspicion clears once a connection has lasted
   :data:`STABLE_AFTER` seconds.
 * **Stalled connection**: the bridge reports a connection whose oldest unacknowledged segment has
@@ -49,7 +50,7 @@ __all__ = [
 
 #: A connection closed by the broker this soon after its CONNACK counts towards a takeover streak (3.1.1).
 SHORT_LIVED = 3.0
-#: This many short-lived connections in a row (MQTT 3.1.1) mean another client uses our id.
+#: This many short-lived connections in a row mean another client uses our id (when no 0x8E says so).
 TAKEOVER_STREAK = 3
 #: The first wait after a takeover; it doubles up to ``takeover_backoff_max``.
 TAKEOVER_FIRST = 2.0
@@ -76,7 +77,6 @@ class ReconnectPolicy:
         reconnect_max: float,
         probe_interval: float,
         takeover_backoff_max: float,
-        protocol_v5: bool,
         rng: random.Random | None = None,
     ) -> None:
         if endpoints < 1:
@@ -85,7 +85,6 @@ class ReconnectPolicy:
         self.reconnect_min, self.reconnect_max = reconnect_min, max(reconnect_min, reconnect_max)
         self.probe_interval = probe_interval
         self.takeover_backoff_max = max(TAKEOVER_FIRST, takeover_backoff_max)
-        self.protocol_v5 = protocol_v5
         self._rng = rng or random.Random()
         self.last_index = endpoints - 1  # so the first choice is endpoint 0
         self._refusals = 0
@@ -130,7 +129,7 @@ class ReconnectPolicy:
             return now  # a node answered a probe a moment ago: connect at once
         if lasted < SHORT_LIVED:
             self._short_streak += 1
-            if self.takeover_suspected or (not self.protocol_v5 and self._short_streak >= TAKEOVER_STREAK):
+            if self.takeover_suspected or self._short_streak >= TAKEOVER_STREAK:
                 return self._taken_over(now)
             if self._short_streak > 1:  # a broker that keeps closing us at once: back off as for a refusal
                 return self.refused(now)

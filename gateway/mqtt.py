@@ -201,7 +201,6 @@ class MqttBridge:
             reconnect_max=settings.reconnect_max,
             probe_interval=settings.probe_interval,
             takeover_backoff_max=settings.takeover_backoff_max,
-            protocol_v5=settings.protocol == "5",
             rng=rng,
         )
         self._buffer = OfflineBuffer(settings.telemetry_buffer, settings.telemetry_buffer_age)

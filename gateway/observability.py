@@ -59,6 +59,12 @@ HELP: dict[str, str] = {
     "mqtt_disconnects_total": "Unexpected broker disconnections, by link",
     "mqtt_connect_failures_total": "Broker connection attempts that failed, by link",
     "mqtt_connect_refused_total": "Broker connections refused (bad credentials, not authorised), by link",
+    "mqtt_takeovers_total": "Connections taken over by another client with our client id, by link",
+    "mqtt_client_id_conflict": "1 while another client seems to use our client id (see the ERROR log)",
+    "mqtt_stalls_total": "Connections whose data TCP kept retransmitting (path down), by link",
+    "telemetry_buffered": "osd messages held while the broker is unreachable, by link",
+    "telemetry_dropped_total": "Buffered osd dropped (the oldest first), by reason: overflow or age",
+    "telemetry_delivered_late_total": "Buffered osd delivered after the broker came back, by link",
     "mqtt_subscribe_refused_total": "Subscriptions the broker refused (ACL), by link",
     "mqtt_messages_in_total": "MQTT messages received, by link",
     "mqtt_messages_out_total": "MQTT messages published, by link",
@@ -268,10 +274,15 @@ class Observability:
             "uptime_s": round(self._clock() - self._started_at, 3),
             "started": bool(getattr(app, "started", None) and app.started.is_set()),
             "broker": {
-                "url": _safe_url(app.settings.broker.url),
+                "url": ", ".join(_safe_url(u) for u in app.settings.broker.urls),
                 "connected": bool(bridge is not None and bridge.connected),
                 "subscribed": bool(bridge is not None and bridge.subscribed),
                 "inbound_queue": bridge.queue.qsize() if bridge is not None else 0,
+                "node": _safe_url(bridge.current.url) if bridge is not None and bridge.current else None,
+                "stalled": bool(bridge is not None and bridge.stalled),
+                "telemetry_buffered": bridge.buffered if bridge is not None else 0,
+                # another client uses our client id (MQTT 5 0x8E, or 3.1.1 immediate disconnects)
+                "client_id_conflict": bool(bridge is not None and bridge.takeover_suspected),
             },
             "requests_in_flight": int(getattr(dispatcher, "in_flight", 0)) if dispatcher is not None else 0,
             "devices": devices,
@@ -324,6 +335,7 @@ class Observability:
             "started": bool(snap["started"]),
             "event_loop": bool(snap["loop_responsive"]),
             "broker": bool(snap["broker"]["connected"]),
+            "client_id_unique": not snap["broker"].get("client_id_conflict", False),
         }
         return all(checks.values()), checks
 

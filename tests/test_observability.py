@@ -99,7 +99,10 @@ def test_a_session_shows_in_the_metrics(rig: dict[str, Any], can_channel: str) -
     cloud: CloudClient = rig["cloud"]
     assert get(port, "/healthz") == (
         200,
-        {"status": "ok", "checks": {"started": True, "event_loop": True, "broker": True}},
+        {
+            "status": "ok",
+            "checks": {"started": True, "event_loop": True, "broker": True, "client_id_unique": True},
+        },
     )
 
     # a broker outage: /healthz says so, the gateway reconnects by itself

@@ -1,0 +1,85 @@
+"""One owner per identity: two gateways with the same client id on one broker. Each notices, logs one
+ERROR naming the client id and the likely cause, backs off exponentially instead of knocking the other
+off every 0.4 s, and says so in /healthz and a metric. MQTT 5 (the broker's 0x8E) and MQTT 3.1.1 (a
+pattern of immediate disconnects), against a real mosquitto."""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+import urllib.error
+import urllib.request
+import uuid
+from typing import Any
+
+import pytest
+
+from gateway.local_broker import LocalBroker
+from tests.support import GatewayThread, gateway_settings, wait_until
+
+pytestmark = pytest.mark.broker
+
+
+def _healthz(port: int) -> tuple[int, dict[str, Any]]:
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=5) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as exc:
+        return exc.code, json.loads(exc.read())
+
+
+@pytest.mark.parametrize("protocol", ["5", "3.1.1"])
+def test_two_gateways_with_one_client_id_back_off_and_say_so(
+    private_broker: LocalBroker, protocol: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    client_id = f"djigw-twin-{uuid.uuid4().hex[:6]}"
+    broker = {"client_id": client_id, "protocol": protocol, "reconnect_min": 0.5, "reconnect_max": 30.0}
+    first = gateway_settings(private_broker.port, [], gateway_sn="GW-TWIN-1", broker=broker,
+                             metrics={"enabled": True, "port": 0})  # fmt: skip
+    second = gateway_settings(private_broker.port, [], gateway_sn="GW-TWIN-1", broker=broker)
+    a = GatewayThread(first).start()
+    b: GatewayThread | None = None
+    try:
+        with caplog.at_level(logging.ERROR, logger="gateway.mqtt"):
+            b = GatewayThread(second).start(connected=False)
+            apps = [a.app, b.app]
+            wait_until(
+                lambda: all(x.bridge.takeover_suspected for x in apps), 30, what="both notice the twin"
+            )
+            t0 = time.monotonic()
+            connects0 = sum(x.metrics.count("mqtt_connects_total") for x in apps)
+            time.sleep(8.0)
+            connects = sum(x.metrics.count("mqtt_connects_total") for x in apps) - connects0
+            elapsed = time.monotonic() - t0
+        errors = [r.getMessage() for r in caplog.records if "took over" in r.getMessage()]
+        # one ERROR per gateway for the whole streak, naming the id and the likely cause
+        assert len(errors) == 2, errors
+        assert all(client_id in e and "same gateway_sn or broker.client_id" in e for e in errors)
+        # before: a takeover every 0.4 s, forever (20 connections in 8 s); now the backoff has grown
+        assert connects <= 8, f"{connects} connections in {elapsed:.1f} s"
+        assert all(x.metrics.count("mqtt_takeovers_total") >= 1 for x in apps)
+        assert a.app.metrics.gauges[("mqtt_client_id_conflict", (("link", "main"),))] == 1
+        assert a.app.observability is not None
+        code, body = _healthz(a.app.observability.port)
+        assert code == 503 and body["checks"]["client_id_unique"] is False, body
+    finally:
+        if b is not None:
+            b.stop()
+        a.stop()
+
+
+def test_a_lone_gateway_is_not_taken_for_a_twin_across_broker_restarts(private_broker: LocalBroker) -> None:
+    """Broker restarts close the connection too; a connection that lasted is not a takeover."""
+    settings = gateway_settings(private_broker.port, [], broker={"protocol": "3.1.1"})
+    with GatewayThread(settings) as gw:
+        for _ in range(4):
+            time.sleep(SHORT_LIVED_PLUS)
+            private_broker.stop(kill=True)
+            private_broker.start()
+            wait_until(lambda: gw.app.bridge.subscribed, 10, what="reconnected")
+        assert not gw.app.bridge.takeover_suspected
+        assert gw.app.metrics.count("mqtt_takeovers_total") == 0
+
+
+SHORT_LIVED_PLUS = 3.2  # a little longer than gateway.broker_link.SHORT_LIVED
