@@ -6,7 +6,9 @@ loop. Reading: a port with a file descriptor (a tty, a pty, ``socket://``) is wa
 loop itself (``add_reader``; pyserial reads it without blocking once its timeout is 0): no thread and
 no cross-thread hand-off per burst, which is what lets one gateway serve hundreds of ports. A port
 without one (``rfc2217://``, ``loop://``) gets a reader thread that hands bytes over with
-``call_soon_threadsafe``. pyserial exceptions become :class:`LinkError`; a port that fails (cable
+``call_soon_threadsafe``. A tty is opened with ``exclusive=True`` (an advisory ``flock``): a port another
+process holds locked is reported as "in use by another process" with the command that finds it.
+pyserial exceptions become :class:`LinkError`; a port that fails (cable
 unplugged, pty closed, socket dropped) is closed and reported once through ``on_down``; the adapter
 reopens it.
 """
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import logging
 import queue
 import threading
@@ -82,6 +85,11 @@ class SerialLink:
         try:
             port = await asyncio.to_thread(self._make_port)
         except (serial.SerialException, OSError, ValueError) as exc:
+            if getattr(exc, "errno", None) in (errno.EWOULDBLOCK, errno.EAGAIN) and "lock" in str(exc):
+                raise LinkError(
+                    f"cannot open {self.url}: in use by another process (find it with "
+                    f"'fuser -v {self.url}' or 'lsof {self.url}')"
+                ) from None
             raise LinkError(f"cannot open {self.url}: {exc}") from None
         self._port = port
         self._generation += 1
@@ -115,6 +123,9 @@ class SerialLink:
             "baudrate": self.baudrate,
             "timeout": 0.05,
             "write_timeout": 1.0,
+            # flock(LOCK_EX) on a tty: a second gateway (or any program that locks) cannot share the UART;
+            # URL ports (socket://) ignore it
+            "exclusive": True,
             **self._options,
         }
         return serial.serial_for_url(self.url, **kwargs)
