@@ -12,7 +12,7 @@ PY     := $(VENV)/bin/python
 RUNTIME := $(VENV)/.installed-runtime
 DEV     := $(VENV)/.installed-dev
 
-.PHONY: all run test bench lint venv mosquitto clean schema
+.PHONY: all run test bench lint venv mosquitto nats clean schema
 
 all: test
 
@@ -30,24 +30,40 @@ $(DEV): $(RUNTIME)
 
 venv: $(DEV)
 
-# The tests start their own brokers; they need the binary, not a running service.
+# The tests start their own brokers; they need the binaries, not running services: mosquitto, and
+# nats-server for the 3-node cluster tests (Debian's package, 2.9: MQTT 3.1.1, clustering, JetStream).
+# iproute2 (ip, tc) for the network-namespace tests (they skip, saying why, where they cannot run).
+APT_INSTALL = apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq
+
 mosquitto:
 	@if command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ]; then :; \
 	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then \
 		echo "installing mosquitto with apt-get"; \
-		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mosquitto >/dev/null; \
+		$(APT_INSTALL) mosquitto >/dev/null; \
 	else \
 		echo "mosquitto is missing: install it (e.g. 'sudo apt-get install mosquitto') and run again" >&2; exit 1; \
+	fi
+
+nats:
+	@if command -v nats-server >/dev/null 2>&1 || [ -x /usr/sbin/nats-server ]; then :; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing nats-server with apt-get"; \
+		$(APT_INSTALL) nats-server >/dev/null; \
+	else \
+		echo "nats-server is missing: install it (e.g. 'sudo apt-get install nats-server') and run again" >&2; exit 1; \
+	fi
+	@if ! command -v ip >/dev/null 2>&1 && [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing iproute2 with apt-get"; $(APT_INSTALL) iproute2 >/dev/null || true; \
 	fi
 
 lint: venv
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
-test: venv mosquitto lint
+test: venv mosquitto nats lint
 	$(PY) -m pytest -q
 
-bench: venv mosquitto
+bench: venv mosquitto nats
 	$(PY) bench/run.py
 
 run: $(RUNTIME) mosquitto

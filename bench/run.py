@@ -116,6 +116,7 @@ SUITES: list[tuple[str, Suite]] = [
     ("fleet", _lazy("bench.fleet")),
     ("restarts", _lazy("bench.restarts")),
     ("resume", _lazy("bench.resume")),
+    ("partitions", _lazy("bench.partitions")),
     ("soak", _lazy("bench.soak")),
 ]
 #: suites timed inside this one process, pinned to one CPU. The others run brokers, gateways and

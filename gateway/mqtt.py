@@ -221,6 +221,7 @@ class MqttBridge:
         self._aborting = False
         self._loss = Loss.CLOSED
         self._session_live = False  # CONNACK accepted on the current connection
+        self._had_session = False  # a CONNACK was ever accepted: later connections resume the session
         self._failing_since: float | None = None  # first failed attempt of the current streak
         self._supervisor: threading.Thread | None = None
         self._ssl: ssl.SSLContext | None = None
@@ -436,7 +437,10 @@ class MqttBridge:
             props = Properties(PacketTypes.CONNECT)
             props.SessionExpiryInterval = s.session_expiry
             kwargs["properties"] = props
-            kwargs["clean_start"] = paho.MQTT_CLEAN_START_FIRST_ONLY
+            # a fresh session when the process starts, the same session on every later connection (any
+            # node): requests the broker queued meanwhile are delivered (paho's FIRST_ONLY would count
+            # every connect() call as a first one)
+            kwargs["clean_start"] = not self._had_session
         return kwargs
 
     def _session(self, index: int) -> float:
@@ -534,7 +538,7 @@ class MqttBridge:
         """Until the connection ends: every 50 ms look for a stall; while stalled, probe the nodes and
         drop the connection when one answers (the network is back, TCP's timer is not)."""
         prober: _Prober | None = None
-        next_round = 0.0
+        next_round = stalled_at = 0.0
         try:
             while not self._done.wait(0.05):
                 if self._stop.is_set():
@@ -546,7 +550,7 @@ class MqttBridge:
                     self.stalled = True
                     self._metrics.inc("mqtt_stalls_total", link=self._name)
                     log.warning("broker %s (%s): connection stalled; probing", ep.where(), self._name)
-                    prober, next_round = _Prober(self.endpoints, self.settings.connect_timeout), now
+                    prober, next_round, stalled_at = _Prober(self.endpoints, self.settings.connect_timeout), now, now
                 elif not stuck and self.stalled:
                     self.stalled = False
                     log.info("broker %s (%s): the stalled connection recovered", ep.where(), self._name)
@@ -554,6 +558,13 @@ class MqttBridge:
                         prober.close()
                         prober = None
                     self._in_loop(self.flush)
+                if self.stalled and now - stalled_at > self.settings.stall_timeout:
+                    log.warning("broker %s (%s): stalled for %.1f s: the link is lost; reconnecting",
+                                ep.where(), self._name, now - stalled_at)  # fmt: skip
+                    self._loss = Loss.STALLED
+                    self._abort()
+                    self._wait_done()
+                    return
                 if prober is not None:
                     if now >= next_round:
                         prober.launch(now)
@@ -605,6 +616,7 @@ class MqttBridge:
             self._connack.set()
             return
         self._session_live = True
+        self._had_session = True
         self.last_error = None
         self.last_refusal = None
         if self._failing_since is not None:

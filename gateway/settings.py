@@ -117,6 +117,13 @@ class BrokerSettings(BaseModel):
         "the gateway is back about this long after the broker or the network is",
     )
     connect_timeout: float = Field(5.0, gt=0, le=60, description="TCP + TLS + CONNACK of one attempt (s)")
+    stall_timeout: float = Field(
+        2.0,
+        gt=0,
+        le=60,
+        description="a connection whose data TCP keeps retransmitting this long (s) is given up and remade "
+        "(live control riding it ends); below drc.heartbeat_timeout",
+    )
     takeover_backoff_max: float = Field(
         120.0,
         ge=30,
@@ -256,6 +263,14 @@ class GatewaySettings(BaseSettings):
         idx = [i for i in (getattr(d, "payload_index", None) for d in self.devices) if i is not None]
         if len(set(idx)) != len(idx):
             raise ValueError("payload_index values must be unique")
+        return self
+
+    @model_validator(mode="after")
+    def _stall_before_heartbeat(self) -> GatewaySettings:
+        # a partition longer than the heartbeat timeout must drop the connection, so live control ends
+        # instead of resuming when the link comes back (see docs/reliability.md, cellular links)
+        if self.broker.stall_timeout >= self.drc.heartbeat_timeout:
+            raise ValueError("broker.stall_timeout must be shorter than drc.heartbeat_timeout")
         return self
 
     @classmethod
