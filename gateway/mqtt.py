@@ -550,7 +550,8 @@ class MqttBridge:
                     self.stalled = True
                     self._metrics.inc("mqtt_stalls_total", link=self._name)
                     log.warning("broker %s (%s): connection stalled; probing", ep.where(), self._name)
-                    prober, next_round, stalled_at = _Prober(self.endpoints, self.settings.connect_timeout), now, now
+                    prober = _Prober(self.endpoints, self.settings.connect_timeout)
+                    next_round = stalled_at = now
                 elif not stuck and self.stalled:
                     self.stalled = False
                     log.info("broker %s (%s): the stalled connection recovered", ep.where(), self._name)
