@@ -31,6 +31,7 @@ import ssl
 import struct
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -46,8 +47,10 @@ from gateway.settings import BrokerEndpoint, BrokerSettings
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Inbound", "MqttBridge", "close_client", "tcp_stalled"]
+__all__ = ["Inbound", "MqttBridge", "close_client", "tcp_last_ack_age", "tcp_stalled"]
 
+#: How long sent osd is remembered, to be sent again if its connection turns out to have been dead.
+RECENT_WINDOW = 10.0
 #: MQTT 5 DISCONNECT reason: another connection with the same client id took the session over.
 SESSION_TAKEN_OVER = 0x8E
 
@@ -92,6 +95,22 @@ def tcp_stalled(sock: Any) -> bool:
     retransmits = info[2]
     (unacked,) = struct.unpack_from("I", info, 24)
     return retransmits >= 2 and unacked > 0
+
+
+def tcp_last_ack_age(sock: Any) -> float | None:
+    """Seconds since TCP last received an ACK on ``sock`` (Linux ``tcpi_last_ack_recv``); None if unknown."""
+    raw = _raw_socket(sock)
+    opt = getattr(socket, "TCP_INFO", None)
+    if raw is None or opt is None:
+        return None
+    try:
+        info = raw.getsockopt(socket.IPPROTO_TCP, opt, 104)
+    except OSError:
+        return None
+    if len(info) < 60:
+        return None
+    (ms,) = struct.unpack_from("I", info, 56)
+    return ms / 1000.0
 
 
 class _Prober:
@@ -205,6 +224,9 @@ class MqttBridge:
         )
         self._buffer = OfflineBuffer(settings.telemetry_buffer, settings.telemetry_buffer_age)
         self._buffer_lock = threading.Lock()
+        # buffered-topic messages recently handed to the socket: when a stalled connection is given up,
+        # those sent after its last ACK never arrived, and go back into the buffer (oldest first)
+        self._recent: deque[tuple[float, str, bytes]] = deque(maxlen=max(1, settings.telemetry_buffer))
         self._drops_counted = (0, 0)
         self._connected = asyncio.Event()
         self._subscribed = threading.Event()  # set once the broker acknowledged every subscription
@@ -312,7 +334,15 @@ class MqttBridge:
                     if not self.stalled and self.connected:
                         self._flush_locked()
                     return True
+                self._remember(topic, payload)
         return self._send(topic, payload, qos, retain)
+
+    def _remember(self, topic: str, payload: bytes) -> None:
+        now = self._clock()
+        recent = self._recent
+        while recent and now - recent[0][0] > RECENT_WINDOW:
+            recent.popleft()
+        recent.append((now, topic, payload))
 
     def _send(self, topic: str, payload: bytes, qos: int, retain: bool) -> bool:
         info = self._client.publish(topic, payload, qos=qos, retain=retain)
@@ -338,6 +368,7 @@ class MqttBridge:
                 self._buffer.put_back(items[n:])
                 self._count_buffer()
                 return n
+            self._remember(topic, payload)
             self._metrics.inc("mqtt_messages_out_total", link=self._name)
         if items:
             self._metrics.inc("telemetry_delivered_late_total", len(items), link=self._name)
@@ -563,6 +594,7 @@ class MqttBridge:
                     log.warning("broker %s (%s): stalled for %.1f s: the link is lost; reconnecting",
                                 ep.where(), self._name, now - stalled_at)  # fmt: skip
                     self._loss = Loss.STALLED
+                    self._requeue_unacked()
                     self._abort()
                     self._wait_done()
                     return
@@ -574,12 +606,29 @@ class MqttBridge:
                         log.warning("broker (%s): a node answers again: dropping the stalled connection",
                                     self._name)  # fmt: skip
                         self._loss = Loss.STALLED
+                        self._requeue_unacked()
                         self._abort()
                         self._wait_done()
                         return
         finally:
             if prober is not None:
                 prober.close()
+
+    def _requeue_unacked(self) -> None:
+        """The stalled connection is given up: the buffered-topic messages written to it after its last
+        ACK (50 ms of margin) did not arrive; they go back into the buffer ahead of what came later."""
+        age = tcp_last_ack_age(self._client.socket())
+        if age is None or self._buffered is None:
+            return
+        cut = self._clock() - age - 0.05
+        with self._buffer_lock:
+            lost = [(at, topic, payload) for at, topic, payload in self._recent if at >= cut]
+            self._recent.clear()
+            if lost:
+                self._buffer.put_back(lost)
+                self._count_buffer()
+        if lost:
+            self._metrics.inc("telemetry_requeued_total", len(lost), link=self._name)
 
     def _abort(self) -> None:
         """Drop the connection without a DISCONNECT (it is stuck or never answered): paho's thread sees

@@ -65,6 +65,7 @@ HELP: dict[str, str] = {
     "telemetry_buffered": "osd messages held while the broker is unreachable, by link",
     "telemetry_dropped_total": "Buffered osd dropped (the oldest first), by reason: overflow or age",
     "telemetry_delivered_late_total": "Buffered osd delivered after the broker came back, by link",
+    "telemetry_requeued_total": "osd written to a connection given up after its last ACK, buffered again",
     "mqtt_subscribe_refused_total": "Subscriptions the broker refused (ACL), by link",
     "mqtt_messages_in_total": "MQTT messages received, by link",
     "mqtt_messages_out_total": "MQTT messages published, by link",

@@ -111,10 +111,21 @@ class VethLink:
             _ip("addr", "add", f"{self.gw_ip}/30", "dev", self.gw_if, ns=self.ns)
             _ip("link", "set", self.gw_if, "up", ns=self.ns)
             _ip("link", "set", "lo", "up", ns=self.ns)
+            # fixed neighbours: a cellular interface (raw IP, PPP) has no ARP, and an ARP entry that went
+            # FAILED during a partition would add its own re-resolution delay to every figure
+            host_mac, gw_mac = self._mac(self.host_if, None), self._mac(self.gw_if, self.ns)
+            _ip("neigh", "replace", self.gw_ip, "lladdr", gw_mac, "dev", self.host_if, "nud", "permanent")
+            _ip("neigh", "replace", self.host_ip, "lladdr", host_mac, "dev", self.gw_if, "nud", "permanent",
+                ns=self.ns)  # fmt: skip
         except subprocess.CalledProcessError as exc:
             self.__exit__()
             raise RuntimeError(f"{' '.join(exc.cmd)}: {exc.stderr.strip()}") from None
         return self
+
+    @staticmethod
+    def _mac(dev: str, ns: str | None) -> str:
+        out = _ip("-o", "link", "show", dev, ns=ns).stdout
+        return out.split("link/ether", 1)[1].split()[0]
 
     def __exit__(self, *exc: object) -> None:
         _ip("link", "del", self.host_if, check=False)  # removes both ends
