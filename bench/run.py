@@ -117,6 +117,7 @@ SUITES: list[tuple[str, Suite]] = [
     ("restarts", _lazy("bench.restarts")),
     ("resume", _lazy("bench.resume")),
     ("partitions", _lazy("bench.partitions")),
+    ("failover", _lazy("bench.failover")),
     ("soak", _lazy("bench.soak")),
 ]
 #: suites timed inside this one process, pinned to one CPU. The others run brokers, gateways and

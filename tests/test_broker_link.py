@@ -123,3 +123,14 @@ def test_offline_buffer_is_bounded_by_count_and_age_oldest_first_in_order() -> N
     off = OfflineBuffer(limit=0, max_age=1.0)
     off.add(0.0, "t", b"x")
     assert len(off) == 0 and off.dropped_overflow == 1
+
+
+def test_the_policy_module_is_sans_io() -> None:
+    """No sockets, threads, clocks or paho in the decisions: everything arrives as values."""
+    from tests.test_sans_io import FORBIDDEN_STDLIB, ROOT, _imports
+
+    names = _imports(ROOT / "gateway" / "broker_link.py")
+    assert not {n.split(".")[0] for n in names} & (FORBIDDEN_STDLIB | {"paho"}), names
+    assert all(
+        n.split(".")[0] in {"__future__", "random", "collections", "dataclasses", "enum"} for n in names
+    )
