@@ -48,7 +48,10 @@ class Cloud:
         )
         self.client.reconnect_delay_set(0.1, 0.5)
         self.client.max_inflight_messages_set(1000)
-        subs = [(t, 1) for t in (topics or [f"thing/product/{GW}/services_reply"])]
+        self.topologies: list[float] = []  # when each update_topo arrived
+        subs = [
+            (t, 1) for t in (topics or [f"thing/product/{GW}/services_reply", f"sys/product/{GW}/status"])
+        ]
         self._subscribed = threading.Event()
         self.client.on_connect = lambda c, u, f, rc, p: c.subscribe(subs)
         self.client.on_subscribe = lambda *a: self._subscribed.set()
@@ -60,6 +63,10 @@ class Cloud:
 
     def _on_message(self, client: Any, userdata: Any, msg: paho.MQTTMessage) -> None:
         now = time.monotonic()
+        if msg.topic.endswith("/status"):
+            with self._lock:
+                self.topologies.append(now)
+            return
         tid = json.loads(msg.payload)["tid"]
         with self._lock:
             self.replies.setdefault(tid, []).append(bytes(msg.payload))
@@ -132,6 +139,10 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
             done = cloud.answered()
             return [t for t, at in list(sent.items()) if at > killed_at and t in done]
 
+        # re-subscribed and announced again on the new node
+        wait_until(
+            lambda: any(t > killed_at for t in cloud.topologies), 30, what="update_topo after the kill"
+        )
         wait_until(after, 30, what="a request sent after the kill answered")
         first_answer = min(cloud.reply_times[t] for t in after()) - killed_at
         wait_until(lambda: len(after()) >= 20, 30, what="20 requests answered after the failover")
