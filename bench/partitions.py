@@ -34,7 +34,7 @@ from bench.run import Config, Row
 from gateway.local_broker import LocalBroker, free_port
 from gateway.mqtt import close_client
 from tests.netlab import LinkEmulator, VethLink, enter_netns, netem_problem, netns_problem
-from tests.support import GatewayThread, gateway_settings
+from tests.support import DrcSticks, GatewayThread, answer_event, gateway_settings
 
 GW = "GW-CELL-1"
 PI = "1001-0-0"
@@ -81,10 +81,7 @@ class _Cloud:
                 self.replies.setdefault(body["tid"], (now, int(body["data"].get("result", -1))))
             elif msg.topic.endswith("/events"):
                 self.events.append(body)
-        if msg.topic.endswith("/events") and body.get("need_reply") == 1:
-            reply = {"tid": body["tid"], "bid": body["bid"], "timestamp": 0, "method": body["method"],
-                     "data": {"result": 0}}  # fmt: skip
-            client.publish(msg.topic + "_reply", json.dumps(reply), qos=1)
+        answer_event(client, msg.topic, body)
 
     def request(self, tid: str, method: str, data: dict[str, Any]) -> float:
         body = {"tid": tid, "bid": "b", "timestamp": 0, "method": method, "data": data}
@@ -241,32 +238,6 @@ class Partition:
     stalls: int = 0
 
 
-class _Drive:
-    """The cloud's live control: sticks at 20 Hz, heartbeats at 5 Hz, published whatever the link does."""
-
-    def __init__(self, cloud: _Cloud, yaw_rate: float) -> None:
-        self.cloud, self.yaw_rate, self.seq = cloud, yaw_rate, 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        down = f"thing/product/{GW}/drc/down"
-        n = 0
-        while not self._stop.wait(0.05):
-            n += 1
-            self.seq += 1
-            stick = {"method": "drone_control", "data": {"seq": self.seq, "w": self.yaw_rate}}
-            self.cloud.client.publish(down, json.dumps(stick), qos=0)
-            if n % 4 == 0:
-                beat = {"method": "heart_beat", "data": {"seq": self.seq, "timestamp": self.seq}}
-                self.cloud.client.publish(down, json.dumps(beat), qos=0)
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._thread.join(2)
-
-
 def measure_partition(rig: Rig, seconds: float) -> Partition:
     cloud, sim, app = rig.cloud, rig.sim, rig.gw.app
     if cloud.call("payload_authority_grab", {"payload_index": PI}) != 0:
@@ -274,7 +245,7 @@ def measure_partition(rig: Rig, seconds: float) -> Partition:
     enter = {"mqtt_broker": rig.main_broker, "osd_frequency": 5, "hsi_frequency": 1}
     if cloud.call("drc_mode_enter", enter) != 0:
         raise RuntimeError("drc_mode_enter refused")
-    drive = _Drive(cloud, 20.0)
+    drive = DrcSticks(cloud.client, GW, yaw_rate=20.0)
     requests: dict[str, float] = {}
     stop_requests = threading.Event()
 
@@ -382,7 +353,7 @@ def measure_partition(rig: Rig, seconds: float) -> Partition:
         )
     finally:
         stop_requests.set()
-        drive.stop()
+        drive.close()
 
 
 def method() -> str | None:

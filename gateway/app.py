@@ -103,7 +103,7 @@ class GatewayApp:
         # the will and the clean goodbye are the same: a topology with no sub-devices (all offline)
         northbound_holder: dict[str, Any] = {}
         self.bridge = MqttBridge(
-            s.broker,
+            s.broker.for_live_control(s.drc.heartbeat_timeout),
             client_id=s.broker.client_id or f"djigw-{gw}",
             subscriptions=subs,
             loop=loop,

@@ -456,6 +456,7 @@ class DrcController:
             tls_hostname_check=main.tls_hostname_check,
             reconnect_min=main.reconnect_min,
             reconnect_max=main.reconnect_max,
+            stall_timeout=main.for_live_control(self.settings.drc.heartbeat_timeout).stall_timeout,
             session_expiry=0,
         )
         bridge = self._link_factory(

@@ -8,8 +8,10 @@ made in the connect callback every time, so a broker restart that forgot them is
 
 Threads: one *supervisor* per bridge (``mqtt-<name>``) finds a broker node and connects (TCP probes
 to every ``broker.url``, then paho's ``connect``), starts paho's network thread for that one
-connection, watches it (a connection whose data TCP keeps retransmitting is *stalled*) and, when it
-ends, asks :class:`gateway.broker_link.ReconnectPolicy` when and where to go next. paho's own
+connection, watches it (a connection whose data TCP keeps retransmitting is *stalled*: it is dropped
+as soon as a probe finds a node answering, or after ``broker.stall_timeout``, and the osd written to it
+after its last ACK goes back into the buffer) and, when it ends, asks
+:class:`gateway.broker_link.ReconnectPolicy` when and where to go next. paho's own
 reconnect is off: the policy decides (failover across nodes, probing, backoff, client-id takeover).
 QoS 1 messages published meanwhile wait in paho's queue and go out after the next CONNACK, on
 whichever node; osd (the topics ``buffered`` selects, QoS 0) waits in a bounded
@@ -77,40 +79,38 @@ def _raw_socket(sock: Any) -> socket.socket | None:
     return raw if isinstance(raw, socket.socket) else None
 
 
-def tcp_stalled(sock: Any) -> bool:
-    """True when TCP has retransmitted the oldest unacknowledged segment at least twice without an
-    ACK (Linux ``TCP_INFO``: ``tcpi_retransmits`` ≥ 2 with data in flight): the path is down, or
-    was, and the connection now waits out a retransmission timer that doubles each time. False
-    where ``TCP_INFO`` does not exist."""
+def _tcp_info(sock: Any) -> bytes | None:
+    """Linux ``TCP_INFO`` of the connection (``struct tcp_info``), or None where there is none."""
     raw = _raw_socket(sock)
     opt = getattr(socket, "TCP_INFO", None)
     if raw is None or opt is None:
-        return False
+        return None
     try:
         info = raw.getsockopt(socket.IPPROTO_TCP, opt, 104)
     except OSError:
+        return None
+    return info if len(info) >= 60 else None
+
+
+def tcp_stalled(sock: Any) -> bool:
+    """True when TCP has retransmitted the oldest unacknowledged segment at least twice without an
+    ACK (``tcpi_retransmits`` ≥ 2 with data in flight, ``tcpi_unacked``): the path is down, or was, and
+    the connection now waits out a retransmission timer that doubles each time. False where
+    ``TCP_INFO`` does not exist."""
+    info = _tcp_info(sock)
+    if info is None:
         return False
-    if len(info) < 28:
-        return False
-    retransmits = info[2]
     (unacked,) = struct.unpack_from("I", info, 24)
-    return retransmits >= 2 and unacked > 0
+    return info[2] >= 2 and unacked > 0
 
 
 def tcp_last_ack_age(sock: Any) -> float | None:
-    """Seconds since TCP last received an ACK on ``sock`` (Linux ``tcpi_last_ack_recv``); None if unknown."""
-    raw = _raw_socket(sock)
-    opt = getattr(socket, "TCP_INFO", None)
-    if raw is None or opt is None:
-        return None
-    try:
-        info = raw.getsockopt(socket.IPPROTO_TCP, opt, 104)
-    except OSError:
-        return None
-    if len(info) < 60:
+    """Seconds since TCP last received an ACK on ``sock`` (``tcpi_last_ack_recv``); None if unknown."""
+    info = _tcp_info(sock)
+    if info is None:
         return None
     (ms,) = struct.unpack_from("I", info, 56)
-    return ms / 1000.0
+    return float(ms) / 1000.0
 
 
 class _Prober:
@@ -528,7 +528,7 @@ class MqttBridge:
                 return self._attempt_failed(ep, "no CONNACK within connect_timeout")
             self._connack.wait(0.05)
         if self._stop.is_set():
-            self._wait_done()
+            self._close_for_stop()
             return self._clock()
         if self._refused or not self._connack.is_set():
             self._wait_done()
@@ -573,7 +573,7 @@ class MqttBridge:
         try:
             while not self._done.wait(0.05):
                 if self._stop.is_set():
-                    self._wait_done()
+                    self._close_for_stop()
                     return
                 stuck = tcp_stalled(self._client.socket())
                 now = self._clock()
@@ -639,6 +639,11 @@ class MqttBridge:
             with contextlib.suppress(OSError):
                 socket.socket.shutdown(raw, socket.SHUT_RDWR)  # the plain socket's, also under TLS
 
+    def _close_for_stop(self) -> None:
+        """Stopping: end the connection with a DISCONNECT (:meth:`stop` may have sent it already)."""
+        self._client.disconnect()
+        self._wait_done()
+
     def _wait_done(self) -> None:
         if not self._done.wait(self.settings.connect_timeout):
             log.warning("broker (%s): the network thread did not end the connection in time", self._name)
@@ -686,7 +691,8 @@ class MqttBridge:
             len(self.subscriptions),
         )
         self._connack.set()
-        self._loop.call_soon_threadsafe(self._after_connect)
+        with contextlib.suppress(RuntimeError):  # the loop closed during shutdown
+            self._loop.call_soon_threadsafe(self._after_connect)
 
     def _on_subscribe(self, client: paho.Client, userdata: Any, mid: int, reasons: Any, props: Any) -> None:
         if mid != self._sub_mid:

@@ -122,7 +122,7 @@ class BrokerSettings(BaseModel):
         gt=0,
         le=60,
         description="a connection whose data TCP keeps retransmitting this long (s) is given up and remade "
-        "(live control riding it ends); below drc.heartbeat_timeout",
+        "(live control riding it ends); at most ⅔ of drc.heartbeat_timeout is used",
     )
     takeover_backoff_max: float = Field(
         120.0,
@@ -153,6 +153,13 @@ class BrokerSettings(BaseModel):
         if len({(e.host, e.port) for e in endpoints}) != len(endpoints):
             raise ValueError("a broker url is listed twice")
         return v
+
+    def for_live_control(self, heartbeat_timeout: float) -> BrokerSettings:
+        """These settings with ``stall_timeout`` at most ⅔ of the DRC heartbeat timeout: a partition
+        longer than the heartbeat timeout then always drops the connection, so live control riding it
+        ends instead of resuming when the link comes back."""
+        limit = round(heartbeat_timeout * 2 / 3, 3)
+        return self if self.stall_timeout <= limit else self.model_copy(update={"stall_timeout": limit})
 
     @property
     def urls(self) -> tuple[str, ...]:
@@ -263,14 +270,6 @@ class GatewaySettings(BaseSettings):
         idx = [i for i in (getattr(d, "payload_index", None) for d in self.devices) if i is not None]
         if len(set(idx)) != len(idx):
             raise ValueError("payload_index values must be unique")
-        return self
-
-    @model_validator(mode="after")
-    def _stall_before_heartbeat(self) -> GatewaySettings:
-        # a partition longer than the heartbeat timeout must drop the connection, so live control ends
-        # instead of resuming when the link comes back (see docs/reliability.md, cellular links)
-        if self.broker.stall_timeout >= self.drc.heartbeat_timeout:
-            raise ValueError("broker.stall_timeout must be shorter than drc.heartbeat_timeout")
         return self
 
     @classmethod

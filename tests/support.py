@@ -405,3 +405,30 @@ def drc_controller(devices: Any, outbox: RecordingOutbox, loop: Any, gateway_sn:
         publish_event=lambda *a: None,
         publish_gateway_osd=lambda d: None,
     )
+
+
+class DrcSticks:
+    """The cloud's live-control side: sticks at 20 Hz, heartbeats at 5 Hz on ``drc/down``, whatever the
+    broker's or the link's state (publishes while it is down are simply lost, as on a real link)."""
+
+    def __init__(self, client: paho.Client, gateway_sn: str, yaw_rate: float) -> None:
+        self.client, self.down, self.yaw_rate = client, f"thing/product/{gateway_sn}/drc/down", yaw_rate
+        self.seq = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="test-sticks", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        n = 0
+        while not self._stop.wait(0.05):
+            n += 1
+            self.seq += 1
+            body = {"method": "drone_control", "data": {"seq": self.seq, "w": self.yaw_rate}}
+            self.client.publish(self.down, json.dumps(body), qos=0)
+            if n % 4 == 0:
+                beat = {"method": "heart_beat", "data": {"seq": self.seq, "timestamp": self.seq}}
+                self.client.publish(self.down, json.dumps(beat), qos=0)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2)

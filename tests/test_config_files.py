@@ -119,3 +119,12 @@ def test_a_broker_list_and_a_repeated_broker_flag(tmp_path: Path) -> None:
     assert _settings_from(ns).broker.urls == ("mqtt://a:1", "mqtt://b:2")
     ns = build_parser().parse_args(["run", "--broker", "mqtt://a:1", "--gateway-sn", "G"])
     assert _settings_from(ns).broker.urls == ("mqtt://a:1",)
+
+
+def test_a_stalled_link_is_given_up_before_the_drc_heartbeat_times_out() -> None:
+    """A partition longer than the heartbeat timeout must end live control, never hold and resume: the
+    connection is given up after at most 2/3 of drc.heartbeat_timeout, whatever stall_timeout says."""
+    s = load_settings(None, gateway_sn="G", drc={"heartbeat_timeout": 1.0}, broker={"stall_timeout": 5.0})
+    assert s.broker.for_live_control(s.drc.heartbeat_timeout).stall_timeout == pytest.approx(0.667)
+    d = load_settings(None, gateway_sn="G")
+    assert d.broker.for_live_control(d.drc.heartbeat_timeout).stall_timeout == 2.0  # the default fits

@@ -22,7 +22,7 @@ from adapters.rsdk.sim import GimbalCanSim
 from adapters.simio import PtyEndpoint
 from gateway.local_broker import LocalBroker
 from gateway.mqtt import close_client
-from tests.support import GatewayThread, gateway_settings, wait_until
+from tests.support import DrcSticks, GatewayThread, gateway_settings, wait_until
 
 pytestmark = pytest.mark.broker
 
@@ -174,34 +174,6 @@ def test_requests_across_broker_kills_are_answered_and_acted_on_once(can_channel
         broker.stop()
 
 
-class _Sticks:
-    """The cloud's live-control side on the main broker: sticks at 20 Hz, heartbeats at 5 Hz, whatever the
-    broker's state (publishes while it is down are simply lost, as on a real link)."""
-
-    def __init__(self, client: paho.Client, yaw_rate: float) -> None:
-        self.client, self.yaw_rate = client, yaw_rate
-        self.seq = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="test-sticks", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        down = f"thing/product/{GW}/drc/down"
-        n = 0
-        while not self._stop.wait(0.05):
-            n += 1
-            self.seq += 1
-            body = {"method": "drone_control", "data": {"seq": self.seq, "w": self.yaw_rate}}
-            self.client.publish(down, json.dumps(body), qos=0)
-            if n % 4 == 0:
-                beat = {"method": "heart_beat", "data": {"seq": self.seq, "timestamp": self.seq}}
-                self.client.publish(down, json.dumps(beat), qos=0)
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(2)
-
-
 def _echoed_after(cloud: PersistentCloud, seq: int) -> bool:
     return bool(cloud.find("drc/up", lambda b: b["method"] == "heart_beat" and b["data"]["seq"] > seq))
 
@@ -222,7 +194,7 @@ def test_broker_kills_with_services_and_drc_in_flight(can_channel: str) -> None:
     settings = gateway_settings(broker.port, [device], gateway_sn=GW)
     cloud = PersistentCloud(broker.port)
     gw = GatewayThread(settings).start()
-    sticks: _Sticks | None = None
+    sticks: DrcSticks | None = None
     photo_tids: list[str] = []
 
     def request(tid: str, method: str, data: dict[str, Any]) -> None:
@@ -257,7 +229,7 @@ def test_broker_kills_with_services_and_drc_in_flight(can_channel: str) -> None:
         wait_until(lambda: gw.app.devices.by_sn("RSDK-OUT-2").online, 10, what="gimbal online")
         assert call("grab", "payload_authority_grab", {"payload_index": "1001-0-0"})["data"]["result"] == 0
         time.sleep(1.2)  # the broker's autosave (1 s) has both sessions on disk before the first crash
-        sticks = _Sticks(cloud.client, yaw_rate=20.0)
+        sticks = DrcSticks(cloud.client, GW, yaw_rate=20.0)
         baseline: tuple[set[str], int] | None = None
         for cycle in range(3):
             enter = {"mqtt_broker": main_broker, "osd_frequency": 5, "hsi_frequency": 1}
