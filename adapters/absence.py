@@ -53,7 +53,7 @@ def hint_for(error: str) -> str:
         return (
             "is it plugged in? ls -l /dev/serial/by-id; python -m serial.tools.list_ports -v (docs/serial.md)"
         )
-    if "busy" in low or "resource temporarily unavailable" in low:
+    if "busy" in low or "resource temporarily unavailable" in low or "in use by another process" in low:
         return "another program holds the port (ModemManager? see docs/serial.md)"
     return "see docs/serial.md"
 
