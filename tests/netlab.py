@@ -95,7 +95,9 @@ class VethLink:
         self.ns = f"djigw-{tag}"
         self.host_if = f"vh{tag}"
         self.gw_if = f"vg{tag}"
-        self.k = random.randrange(0, 256)
+        used = _ip("-4", "-o", "addr", "show", check=False).stdout
+        free = [k for k in range(256) if f"10.253.{k}." not in used]  # another run's pair keeps its own
+        self.k = random.choice(free or [random.randrange(0, 256)])
         self.host_ip = f"10.253.{self.k}.1"
         self.gw_ip = f"10.253.{self.k}.2"
         self._made = False
