@@ -11,6 +11,11 @@ process holds locked is reported as "in use by another process" with the command
 pyserial exceptions become :class:`LinkError`; a port that fails (cable
 unplugged, pty closed, socket dropped) is closed and reported once through ``on_down``; the adapter
 reopens it.
+
+``observer`` (None by default) sees the bytes as they cross the port: ``observer("rx", None, chunk)``
+for every read, ``observer("tx", None, frame)`` for every write once it is on the port, from the loop
+or the link's threads: a frame tap (the web console's frame inspector) that must be thread-safe,
+bounded and quick, and whose failure never touches the link.
 """
 
 from __future__ import annotations
@@ -74,10 +79,18 @@ class SerialLink:
         self.bytes_out = 0
         self.frames_out = 0  # write() calls: every adapter here writes one whole frame per call
         self.opens = 0  # successful opens (the first one and every reopen), for the reconnect metric
+        #: frame tap: ``observer(direction, None, data)`` (see the module doc)
+        self.observer: Callable[[str, int | None, bytes], None] | None = None
 
     @property
     def up(self) -> bool:
         return self._up
+
+    def _observe(self, direction: str, data: bytes) -> None:
+        observer = self.observer
+        if observer is not None:
+            with contextlib.suppress(Exception):  # a tap must never take the link down
+                observer(direction, None, data)
 
     async def open(self) -> None:
         if self._up:
@@ -165,6 +178,7 @@ class SerialLink:
             self._failed(gen, f"read failed: {type(exc).__name__}: {exc}")
             return
         self.bytes_in += len(data)
+        self._observe("rx", data)
         self.on_bytes(data)
 
     def _read_loop(self, port: serial.SerialBase, gen: int) -> None:
@@ -177,6 +191,7 @@ class SerialLink:
                 return
             if data:
                 self.bytes_in += len(data)
+                self._observe("rx", data)
                 self._from_thread(self._deliver, gen, data)
 
     def _write_loop(self, port: serial.SerialBase, q: queue.SimpleQueue[bytes | None], gen: int) -> None:
@@ -191,6 +206,7 @@ class SerialLink:
                 try:
                     port.write(data)
                     self.bytes_out += len(data)
+                    self._observe("tx", data)
                 except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
                     self._from_thread(self._failed, gen, f"write failed: {type(exc).__name__}: {exc}")
                     return

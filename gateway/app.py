@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from adapters.base import Adapter
@@ -93,7 +93,11 @@ class GatewayApp:
         self.dispatcher: Dispatcher | None = None
         self.northbound: Northbound | None = None
         self.drc: DrcController | None = None
-        self.observability: Observability | None = None  # /metrics, /healthz, /status (None: off)
+        self.observability: Observability | None = None  # /metrics, /healthz, /status, / (None: off)
+        #: told (topic, payload) of every message the northbound and the dispatcher publish, and of every
+        #: message the dispatcher is handed (not drc/down, answered inline): the web console's log
+        self.published: list[Callable[[str, bytes], None]] = []
+        self.received: list[Callable[[str, bytes], None]] = []
 
     async def run(self) -> None:
         loop = asyncio.get_running_loop()
@@ -113,11 +117,12 @@ class GatewayApp:
             on_disconnected=lambda reason: northbound_holder["drc"].main_link_lost(reason),
             buffered=lambda name: name.endswith("/osd"),  # osd waits out an outage (bounded), in order
         )
+        outbox = _ObservedOutbox(self.bridge, self.published)
         self.northbound = Northbound(
             settings=s,
             registry=self.registry,
             devices=self.devices,
-            outbox=self.bridge,
+            outbox=outbox,
             clock=self.clock,
             metrics=self.metrics,
         )
@@ -145,7 +150,7 @@ class GatewayApp:
             gateway_sn=gw,
             registry=self.registry,
             devices=self.devices,
-            outbox=self.bridge,
+            outbox=outbox,
             settings=s.dispatcher,
             clock=self.clock,
             metrics=self.metrics,
@@ -184,6 +189,8 @@ class GatewayApp:
         queue = self.bridge.queue
         while True:
             item = await queue.get()
+            for observer in self.received:
+                _tell(observer, item.topic, item.payload)
             self.dispatcher.submit(item.topic, item.payload, item.oversize)
 
     async def _shutdown(
@@ -212,3 +219,25 @@ class GatewayApp:
         if self.observability is not None:
             await asyncio.to_thread(self.observability.stop)
         log.info("stopped")
+
+
+def _tell(observer: Callable[[str, bytes], None], topic_name: str, payload: bytes) -> None:
+    try:
+        observer(topic_name, payload)
+    except Exception:  # an observer's bug must not stop the bridge
+        log.exception("a message observer failed")
+
+
+class _ObservedOutbox:
+    """The broker connection as the northbound and the dispatcher publish to it, telling ``observers``
+    (the web console's log) what went out, after it was handed to the bridge."""
+
+    def __init__(self, bridge: MqttBridge, observers: list[Callable[[str, bytes], None]]) -> None:
+        self._bridge = bridge
+        self._observers = observers
+
+    def publish(self, topic: str, payload: bytes, qos: int = 1, retain: bool = False) -> bool:
+        ok = self._bridge.publish(topic, payload, qos, retain)
+        for observer in self._observers:
+            _tell(observer, topic, payload)
+        return ok

@@ -185,13 +185,29 @@ class Dispatcher:
             log.warning("ignored a message on %s (the gateway publishes there)", kind.value)
 
     # -- services -------------------------------------------------------------------------------
-    async def _services(self, payload: bytes) -> None:
+    async def call_local(self, payload: bytes) -> bytes:
+        """One services request from the gateway's own web console: validated, routed, authority-checked,
+        time-limited and counted exactly like one from the cloud; its reply is returned to the caller
+        instead of published (the cloud did not ask). Never raises: a bug answers 599001."""
+        replies: list[bytes] = []
+        try:
+            await self._services(payload, replies.append)
+        except Exception:
+            self.metrics.inc("handler_exceptions_total", where="dispatcher")
+            log.exception("unexpected error while handling a console request")
+            with contextlib.suppress(Exception):
+                self._reply_raw(
+                    payload, ResultCode.INTERNAL_ERROR, "internal error in the gateway", replies.append
+                )
+        return replies[0] if replies else b""
+
+    async def _services(self, payload: bytes, reply_to: Callable[[bytes], None] | None = None) -> None:
         try:
             request = self.registry.validate(TopicKind.SERVICES, payload)
         except ValidationError as exc:
             request = self._stop_despite(payload)
             if request is not None:
-                await self._run_services(request)
+                await self._run_services(request, reply_to)
                 return
             reply = error_reply_from_validation(
                 TopicKind.SERVICES, payload, exc, timestamp=self.clock.time_ms(), gateway=self.gateway_sn
@@ -200,14 +216,14 @@ class Dispatcher:
             logcontext.set_context(method=_metric_method(method), tid=_peek(_TID, payload))
             self.metrics.inc("services_total", method=_metric_method(method), result=_result_of(reply))
             if reply is None:
-                if not self._reply_raw(payload, ResultCode.INVALID_PARAMETERS, "malformed message"):
+                if not self._reply_raw(payload, ResultCode.INVALID_PARAMETERS, "malformed message", reply_to):
                     self.metrics.inc("inbound_rejected_total", reason="unanswerable")
                     log.warning("services message without a readable tid/bid/method: not answered")
             else:
                 log.info("rejected %s: %s", method, _reason_of(reply))
-                self._publish_reply(reply.model_dump_json().encode(), None)
+                self._publish_reply(reply.model_dump_json().encode(), None, reply_to)
             return
-        await self._run_services(request)
+        await self._run_services(request, reply_to)
 
     def _stop_despite(self, payload: bytes) -> Any:
         """A stop service whose ``data`` broke the contract, read as one without parameters (None when
@@ -228,7 +244,7 @@ class Dispatcher:
         log.warning("obeyed %s although its data could not be parsed (a stop is never refused)", method)
         return request
 
-    async def _run_services(self, request: Any) -> None:
+    async def _run_services(self, request: Any, reply_to: Callable[[bytes], None] | None = None) -> None:
         tid = request.tid
         # this task's log lines (the adapter's too) carry method and tid; a secret that arrived in the
         # request (drc_mode_enter's broker password) is masked in every log line from now on
@@ -238,11 +254,11 @@ class Dispatcher:
         if cached is not None:
             self.metrics.inc("services_duplicates_total")
             if cached.payload is not None:
-                self._publish_reply(cached.payload, None)
+                self._publish_reply(cached.payload, None, reply_to)
             else:
                 fut: asyncio.Future[bytes] = asyncio.get_running_loop().create_future()
                 cached.waiters.append(fut)
-                self._publish_reply(await fut, None)
+                self._publish_reply(await fut, None, reply_to)
             return
         entry = self._cache_open(tid)
 
@@ -264,9 +280,10 @@ class Dispatcher:
         )
         if audited(request.method):  # who moved what (a repeated tid is answered from the cache, not here)
             device = logcontext.current().get("device")
-            audit("service", method=request.method, tid=tid, bid=request.bid, source="mqtt",
+            source = "mqtt" if reply_to is None else "console"
+            audit("service", method=request.method, tid=tid, bid=request.bid, source=source,
                   result=int(result), device=device)  # fmt: skip
-        self._publish_reply(raw, entry)
+        self._publish_reply(raw, entry, reply_to)
 
     async def _execute(self, request: Any) -> tuple[int, dict[str, Any] | None]:
         method: str = request.method
@@ -402,7 +419,10 @@ class Dispatcher:
             self._replies.popitem(last=False)
         return entry
 
-    def _publish_reply(self, raw: bytes, entry: _Cached | None) -> None:
+    def _publish_reply(
+        self, raw: bytes, entry: _Cached | None, reply_to: Callable[[bytes], None] | None = None
+    ) -> None:
+        """Complete the cache entry and send the reply: to the broker, or to ``reply_to`` (a console call)."""
         if entry is not None:
             entry.payload = raw
             entry.expires = self.clock.monotonic() + self.settings.reply_cache_seconds
@@ -410,9 +430,14 @@ class Dispatcher:
                 if not fut.done():
                     fut.set_result(raw)
             entry.waiters.clear()
+        if reply_to is not None:
+            reply_to(raw)
+            return
         self.outbox.publish(topic(TopicKind.SERVICES_REPLY, self.gateway_sn), raw, qos=1)
 
-    def _reply_raw(self, payload: bytes, result: int, reason: str) -> bool:
+    def _reply_raw(
+        self, payload: bytes, result: int, reason: str, reply_to: Callable[[bytes], None] | None = None
+    ) -> bool:
         """Answer a message that could not be parsed, when tid, bid and method can still be read."""
         tid, bid, method = _peek(_TID, payload), _peek(_BID, payload), _peek(_METHOD, payload)
         if not (tid and bid and method):
@@ -425,7 +450,7 @@ class Dispatcher:
             method=method,
             data=ResultReply(result=result, output=ErrorOutput(reason=reason)),
         )
-        self._publish_reply(reply.model_dump_json().encode(), None)
+        self._publish_reply(reply.model_dump_json().encode(), None, reply_to)
         return True
 
     # -- other kinds ----------------------------------------------------------------------------

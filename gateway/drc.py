@@ -44,6 +44,7 @@ import logging
 import re
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -80,6 +81,9 @@ class _Down:
     via: MqttBridge
     message: Any
 
+
+#: the request token of an emergency stop the gateway itself raised (no drc/up answer)
+_LOCAL = object()
 
 #: the failsafe reasons reported in metrics and in the gateway osd (``x_drc_failsafe``)
 FAILSAFES = ("sticks", "heartbeat", "emergency_stop", "link_lost", "authority")
@@ -274,6 +278,8 @@ class DrcController:
         self.hsi_hz = 1
         #: the failsafe that fired last and when it first fired (wall clock, ms); None: none holds
         self.failsafe: tuple[str, int] | None = None
+        #: the last heartbeats as (received, the cloud's send time), wall clock ms: the web console's chart
+        self.heartbeats: deque[tuple[int, int]] = deque(maxlen=120)
         self.writer = MotionWriter(
             period=1.0 / self.cfg.stream_hz,
             devices=lambda: list(self.devices),
@@ -587,6 +593,7 @@ class DrcController:
             return
         method = request.method
         if method == "heart_beat":
+            self.heartbeats.append((self.clock.time_ms(), int(request.data.timestamp)))
             self._feed(ds.Heartbeat(now, session, _Down(via, request)))
         elif method == "drone_control":
             problem = self._authority_problem()
@@ -605,6 +612,12 @@ class DrcController:
             audit("emergency_stop", method=method, source="drc", seq=getattr(request.data, "seq", None))
             self._feed(ds.EStop(now, session, _Down(via, request)))
 
+    def emergency_stop(self) -> None:
+        """An emergency stop from the gateway itself (the web console): the session event a drc/down
+        ``drone_emergency_stop`` makes (every device stopped by the motion writer; a session holds until
+        new sticks), answered to nobody. Any thread."""
+        self._feed(ds.EStop(self.now(), self.session.session_id, _LOCAL))
+
     def _to_body(self, data: Any) -> ds.SetPoint:
         x, y = float(data.x) * self.cfg.x_sign, float(data.y) * self.cfg.y_sign
         if self.cfg.swap_xy:  # x forward, y right
@@ -613,6 +626,8 @@ class DrcController:
 
     def _answer_down(self, action: ds.StickReply) -> None:
         token = action.request
+        if token is _LOCAL:  # the gateway's own stop: nobody waits for an answer
+            return
         assert isinstance(token, _Down)
         request = token.message
         if request is None:  # an emergency stop that could not be parsed, obeyed all the same

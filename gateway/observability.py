@@ -2,8 +2,9 @@
 
 Owns the translation of :class:`gateway.metrics.Metrics` (counters, gauges, histograms that every layer
 fills without knowing Prometheus) and of the live objects (devices, their links, the DRC session, the
-broker connection) into Prometheus families and one JSON document, and the small threaded HTTP server
-that serves them on ``metrics.host:metrics.port`` (127.0.0.1:9108 by default).
+broker connection) into Prometheus families and one JSON document. They are served on
+``metrics.host:metrics.port`` (127.0.0.1:9108 by default) by the same aiohttp server as the web console
+(:mod:`gateway.web.server`, on a thread and loop of its own), which :meth:`Observability.start` starts.
 
 Every request reads the gateway through one :meth:`Observability.snapshot`, taken **on the event loop**
 (with a deadline): a loop that cannot answer within :data:`LOOP_DEADLINE` makes ``/healthz`` fail, which
@@ -17,19 +18,16 @@ Knows nothing of paho, bytes or Cloud API methods.
 from __future__ import annotations
 
 import concurrent.futures
-import contextlib
 import importlib.metadata
-import json
 import logging
 import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 from urllib.parse import urlsplit
 
-from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
+from prometheus_client import CollectorRegistry
 from prometheus_client.core import (
     CounterMetricFamily,
     GaugeMetricFamily,
@@ -40,7 +38,7 @@ from prometheus_client.registry import Collector
 
 log = logging.getLogger(__name__)
 
-__all__ = ["LOOP_DEADLINE", "PREFIX", "LinkStats", "Observability", "link_stats"]
+__all__ = ["LOOP_DEADLINE", "PREFIX", "VERSION", "LinkStats", "Observability", "link_stats", "safe_url"]
 
 PREFIX = "djigw_"
 #: How long the event loop may take to hand over a snapshot before the gateway counts as unhealthy.
@@ -186,7 +184,7 @@ class _Monotonic:
             return base + raw
 
 
-def _safe_url(url: str) -> str:
+def safe_url(url: str) -> str:
     """scheme://host:port only: a URL may carry user:password@."""
     parts = urlsplit(url)
     host = parts.hostname or ""
@@ -212,8 +210,7 @@ class Observability:
         self._monotonic = _Monotonic()
         self.registry = CollectorRegistry(auto_describe=False)
         self.registry.register(_Collector(self))
-        self._server: ThreadingHTTPServer | None = None
-        self._thread: threading.Thread | None = None
+        self._server: Any = None  # gateway.web.server.WebServer once started
         self.port: int | None = None
 
     # -- data -------------------------------------------------------------------------------------
@@ -275,11 +272,11 @@ class Observability:
             "uptime_s": round(self._clock() - self._started_at, 3),
             "started": bool(getattr(app, "started", None) and app.started.is_set()),
             "broker": {
-                "url": ", ".join(_safe_url(u) for u in app.settings.broker.urls),
+                "url": ", ".join(safe_url(u) for u in app.settings.broker.urls),
                 "connected": bool(bridge is not None and bridge.connected),
                 "subscribed": bool(bridge is not None and bridge.subscribed),
                 "inbound_queue": bridge.queue.qsize() if bridge is not None else 0,
-                "node": _safe_url(bridge.current.url) if bridge is not None and bridge.current else None,
+                "node": safe_url(bridge.current.url) if bridge is not None and bridge.current else None,
                 "stalled": bool(bridge is not None and bridge.stalled),
                 "telemetry_buffered": bridge.buffered if bridge is not None else 0,
                 # another client uses our client id (MQTT 5 0x8E, or 3.1.1 immediate disconnects)
@@ -346,28 +343,22 @@ class Observability:
 
     # -- HTTP ---------------------------------------------------------------------------------------
     def start(self, host: str, port: int) -> Observability | None:
-        handler = _handler_for(self)
-        try:
-            server = ThreadingHTTPServer((host, port), handler)
-        except OSError as exc:
-            log.warning("metrics endpoint disabled: cannot listen on %s:%d (%s)", host, port, exc.strerror)
+        """Serve these views (and the web console, unless ``console.enabled`` is false) on ``host:port``
+        with :class:`gateway.web.server.WebServer`; called on the gateway's loop. None when the port
+        cannot be bound (logged, never fatal: the bridge matters more than its metrics)."""
+        from gateway.web.server import WebServer  # the web package reads these views: imported late
+
+        server = WebServer(self, self.app.settings.console, self.loop).start(host, port)
+        if server is None:
             return None
-        server.daemon_threads = True
         self._server = server
-        self.port = int(server.server_address[1])
-        self._thread = threading.Thread(target=server.serve_forever, name="observability", daemon=True)
-        self._thread.start()
-        log.info("metrics on http://%s:%d/metrics (also /healthz, /status)", host, self.port)
+        self.port = server.port
         return self
 
     def stop(self) -> None:
         server, self._server = self._server, None
         if server is not None:
-            server.shutdown()
-            server.server_close()
-        if self._thread is not None:
-            self._thread.join(2.0)
-            self._thread = None
+            server.stop()
 
 
 class _Collector(Collector):
@@ -475,39 +466,3 @@ def _families(snap: dict[str, Any]) -> Iterator[Metric]:
         f"{p}drc_command_delay_seconds", "Smoothed delay from a stick message to the device stream",
         value=drc.get("command_delay_ms", 0.0) / 1000.0,
     )  # fmt: skip
-
-
-def _handler_for(obs: Observability) -> type[BaseHTTPRequestHandler]:
-    class Handler(BaseHTTPRequestHandler):
-        server_version = f"dji-gateway/{VERSION}"
-
-        def do_GET(self) -> None:  # the http.server interface
-            path = self.path.split("?", 1)[0].rstrip("/") or "/"
-            try:
-                if path == "/metrics":
-                    self._send(200, CONTENT_TYPE_LATEST, generate_latest(obs.registry))
-                elif path == "/healthz":
-                    snap = obs.snapshot()
-                    healthy, checks = obs.health(snap)
-                    body = {"status": "ok" if healthy else "unhealthy", "checks": checks}
-                    self._send(200 if healthy else 503, "application/json", json.dumps(body).encode())
-                elif path == "/status":
-                    self._send(200, "application/json", json.dumps(obs.status()).encode())
-                else:
-                    self._send(404, "text/plain", b"try /metrics, /healthz or /status\n")
-            except Exception:  # never let a bug here take the server thread down
-                log.exception("observability request %s failed", path)
-                with contextlib.suppress(Exception):
-                    self._send(500, "text/plain", b"internal error\n")
-
-        def _send(self, code: int, content_type: str, body: bytes) -> None:
-            self.send_response(code)
-            self.send_header("Content-Type", content_type)
-            self.send_header("Content-Length", str(len(body)))
-            self.end_headers()
-            self.wfile.write(body)
-
-        def log_message(self, format: str, *args: Any) -> None:
-            log.debug("http %s", format % args)
-
-    return Handler

@@ -7,6 +7,7 @@ and are ``SecretStr`` so they never reach a log line or an error message. No imp
 
 from __future__ import annotations
 
+import ipaddress
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +35,7 @@ __all__ = [
     "BrokerEndpoint",
     "BrokerSettings",
     "ConfigError",
+    "ConsoleSettings",
     "DispatcherSettings",
     "DrcSettings",
     "GatewaySettings",
@@ -241,6 +243,69 @@ class MetricsSettings(BaseModel):
     port: int = Field(9108, ge=0, le=65535, description="HTTP port (0: any free port, logged at start)")
 
 
+#: A console token shorter than this is refused: it guards commands that move aircraft.
+MIN_TOKEN_LENGTH = 16
+
+
+def is_loopback(host: str) -> bool:
+    """True for addresses only this machine reaches: 127.0.0.0/8, ::1 and ``localhost``."""
+    if host.lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+class ConsoleSettings(BaseModel):
+    """The web console at ``/`` of the metrics endpoint (docs/console.md): who may act, what it shows."""
+
+    model_config = _STRICT
+    enabled: bool = Field(True, description="serve the web console at / (beside /metrics, /healthz, /status)")
+    token: SecretStr | None = Field(
+        None,
+        description="actions need it (header or sign-in); required when metrics.host is not loopback: "
+        "better DJIGW_CONSOLE__TOKEN or token_file; never logged",
+    )
+    token_file: Path | None = Field(
+        None, description="read the token from this file (a container secret); wins over token"
+    )
+    read_only: bool = Field(
+        False, description="show everything, refuse every action except the emergency stop"
+    )
+    push_hz: float = Field(10.0, ge=1, le=10, description="state pushes per second to each open page")
+    frames: int = Field(500, ge=10, le=5000, description="frames kept per link for the frame inspector")
+    journal: int = Field(300, ge=10, le=5000, description="events, requests and replies kept for the log")
+    tile_url: str | None = Field(
+        None,
+        description="map tiles ({z}/{x}/{y} URL, e.g. a local tile server); none: the offline metric grid",
+    )
+    session_hours: float = Field(12.0, gt=0, le=720, description="a sign-in lasts this long")
+
+    @field_validator("tile_url")
+    @classmethod
+    def _tiles(cls, v: str | None) -> str | None:
+        if v is not None:
+            parts = urlsplit(v)
+            if parts.scheme not in {"http", "https"} or not parts.hostname:
+                raise ValueError("tile_url must be an http:// or https:// URL")
+            if not all(k in v for k in ("{z}", "{x}", "{y}")):
+                raise ValueError("tile_url must contain {z}, {x} and {y}")
+        return v
+
+    @model_validator(mode="after")
+    def _token(self) -> ConsoleSettings:
+        if self.token_file is not None:
+            try:
+                text = self.token_file.read_text().strip()
+            except OSError as exc:
+                raise ValueError(f"cannot read console.token_file: {exc.strerror}") from None
+            object.__setattr__(self, "token", SecretStr(text))
+        if self.token is not None and len(self.token.get_secret_value()) < MIN_TOKEN_LENGTH:
+            raise ValueError(f"console.token must be at least {MIN_TOKEN_LENGTH} characters")
+        return self
+
+
 DeviceSettings = Annotated[
     RsdkDeviceSettings | OsdkDeviceSettings | RobomasterDeviceSettings, Field(discriminator="type")
 ]
@@ -257,6 +322,7 @@ class GatewaySettings(BaseSettings):
     dispatcher: DispatcherSettings = DispatcherSettings()
     drc: DrcSettings = DrcSettings()
     metrics: MetricsSettings = MetricsSettings()
+    console: ConsoleSettings = ConsoleSettings()
     devices: list[DeviceSettings] = Field(default_factory=list, max_length=MAX_SUB_DEVICES)
     osd_period: float = Field(2.0, gt=0, description="periodic osd (0.5 Hz by default, per device override)")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
@@ -270,6 +336,12 @@ class GatewaySettings(BaseSettings):
         idx = [i for i in (getattr(d, "payload_index", None) for d in self.devices) if i is not None]
         if len(set(idx)) != len(idx):
             raise ValueError("payload_index values must be unique")
+        m, c = self.metrics, self.console
+        if m.enabled and c.enabled and c.token is None and not is_loopback(m.host):
+            raise ValueError(
+                f"the web console needs console.token (DJIGW_CONSOLE__TOKEN or console.token_file) when "
+                f"metrics.host ({m.host}) is not loopback; or set console.enabled = false"
+            )
         return self
 
     @classmethod

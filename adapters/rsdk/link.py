@@ -5,6 +5,11 @@ notifier thread and a sender thread. Received CAN frames on the gimbal's id are 
 asyncio loop with ``call_soon_threadsafe``; sends go through a queue so a slow or stuck adapter
 never blocks the loop. python-can exceptions become :class:`LinkError`, and a bus that fails
 (unplugged adapter, closed pty, refused socket) is reported once through ``on_down``.
+
+``observer`` (None by default) sees every CAN frame this link receives on the gimbal's id and every one
+it puts on the bus, as ``observer("rx" | "tx", arb_id, data)`` from the notifier or sender thread: a
+frame tap (the web console's frame inspector) that must be thread-safe, bounded and quick, and whose
+failure never touches the link.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ class _Listener(can.Listener):
         if msg.arbitration_id != self._link.rx_id:
             return
         self._link.frames_in += 1
+        self._link._observe("rx", msg.arbitration_id, msg.data)
         self._link._from_thread(self._link.on_frame, msg.arbitration_id, bytes(msg.data))
 
     def on_error(self, exc: Exception) -> None:
@@ -81,10 +87,18 @@ class CanLink:
         self.frames_out = 0
         self.send_errors = 0
         self.opens = 0  # successful opens (the first one and every reopen), for the reconnect metric
+        #: frame tap: ``observer(direction, arb_id, data)`` from the link's threads (see the module doc)
+        self.observer: Callable[[str, int | None, bytes], None] | None = None
 
     @property
     def up(self) -> bool:
         return self._up
+
+    def _observe(self, direction: str, arb_id: int, data: bytes | bytearray) -> None:
+        observer = self.observer
+        if observer is not None:
+            with contextlib.suppress(Exception):  # a tap must never take the link down
+                observer(direction, arb_id, bytes(data))
 
     async def open(self) -> None:
         """Open the bus (in a worker thread: some interfaces block while they open)."""
@@ -153,6 +167,7 @@ class CanLink:
             try:
                 bus.send(msg, timeout=0.2)
                 self.frames_out += 1
+                self._observe("tx", msg.arbitration_id, msg.data)
             except (can.CanError, OSError, ValueError) as exc:
                 self.send_errors += 1
                 self._from_thread(self._failed, f"send failed: {type(exc).__name__}: {exc}")

@@ -1,0 +1,201 @@
+"""The frame inspector: what crossed each device link, kept bounded, decoded by the CLI's own decoders.
+
+Owns :class:`FrameTap`, the observer a link calls from its threads for every CAN frame or serial chunk
+it receives and every one it sends (one ``deque.append``: thread-safe, O(1), bounded); and
+:class:`LinkInspector`, which turns a tap's records into protocol frames (each direction, and on CAN each
+id, is one byte stream cut by the family's own :class:`~adapters.wire.stream.FrameRules`) and describes
+each frame with ``adapters/<family>/describe.py`` — the code behind ``dji-gateway decode``, so the page
+and the command line never disagree. A reply is described against the command with the same seq sent
+before it (``reply_to`` / ``ack_command``), as the CLI does within one input. Downloads: a candump log of
+the CAN frames (``dji-gateway decode rsdk`` reads it back) or one frame per line as hex (serial).
+
+Memory is bounded: a tap keeps its last ``keep`` records, an inspector its last ``keep`` frames, a
+half-received frame at most one frame. Records a slow reader missed are counted as a gap and the
+streams restart. Decoding runs where :meth:`LinkInspector.poll` is called (the web server's thread),
+never in a link's thread nor on the gateway's loop.
+
+Must not know HTTP, the page, the adapters' internals, or any frame layout (the families' rules and
+describe modules know them).
+"""
+
+from __future__ import annotations
+
+import importlib
+import itertools
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from adapters.wire.stream import BadFrame, FrameRules, StreamDecoder
+from gateway.codec_cli import json_safe
+
+__all__ = ["FAMILIES", "FrameTap", "LinkInspector", "Record"]
+
+#: one tap record: (running number, wall time s, "rx" | "tx", CAN id or None, bytes)
+Record = tuple[int, float, str, int | None, bytes]
+
+
+def _rsdk_rules(options: Mapping[str, Any]) -> FrameRules[Any]:
+    from adapters.rsdk.protocol import FrameRules as RsdkRules
+
+    return RsdkRules()
+
+
+def _osdk_rules(options: Mapping[str, Any]) -> FrameRules[Any]:
+    from adapters.osdk.protocol import FrameRules as OsdkRules
+
+    return OsdkRules()
+
+
+def _robomaster_rules(options: Mapping[str, Any]) -> FrameRules[Any]:
+    from adapters.robomaster.protocol import DEFAULT_MAX_DATA_LEN
+    from adapters.robomaster.protocol import FrameRules as RobomasterRules
+
+    return RobomasterRules(int(options.get("max_data_len", DEFAULT_MAX_DATA_LEN)))
+
+
+@dataclass(frozen=True, slots=True)
+class Family:
+    """How a family's frames are cut from a stream and which describe option names a reply's command."""
+
+    rules: Callable[[Mapping[str, Any]], FrameRules[Any]]
+    reply_option: str | None  # describe option naming the command a reply answers
+    reply_flag: str | None  # the describe record's key that marks a reply
+
+
+FAMILIES: dict[str, Family] = {
+    "rsdk": Family(_rsdk_rules, "reply_to", "is_reply"),
+    "osdk": Family(_osdk_rules, "ack_command", "is_ack"),
+    "robomaster": Family(_robomaster_rules, None, None),
+}
+
+
+class FrameTap:
+    """A link's observer: ``tap(direction, can_id, data)`` from any thread keeps the last ``keep`` records."""
+
+    __slots__ = ("_count", "records")
+
+    def __init__(self, keep: int) -> None:
+        self.records: deque[Record] = deque(maxlen=keep)
+        self._count = itertools.count()
+
+    def __call__(self, direction: str, can_id: int | None, data: bytes) -> None:
+        self.records.append((next(self._count), time.time(), direction, can_id, data))
+
+    def snapshot(self) -> tuple[Record, ...]:
+        """The records now held, oldest first (a copy: the link's threads keep appending)."""
+        for _ in range(10):
+            try:
+                return tuple(self.records)
+            except RuntimeError:  # appended to while copied; the copy is retried
+                continue
+        return ()
+
+
+class _RawRules:
+    """A family's frame rules that hand back the frame's bytes instead of its parsed form."""
+
+    def __init__(self, rules: FrameRules[Any]) -> None:
+        self.sof = rules.sof
+        self.header_len = rules.header_len
+        self._rules = rules
+
+    def frame_length(self, header: bytes) -> int | str:
+        return self._rules.frame_length(header)
+
+    def parse(self, frame: bytes) -> bytes | str:
+        result = self._rules.parse(frame)
+        return result if isinstance(result, str) else frame
+
+
+class LinkInspector:
+    """One device link as the inspector shows it (``kind`` "can" or "serial")."""
+
+    def __init__(
+        self, *, family: str, kind: str, where: str, keep: int, options: Mapping[str, Any] | None = None
+    ) -> None:
+        if family not in FAMILIES:
+            raise ValueError(f"no frame inspector for family {family!r}")
+        self.family, self.kind, self.where = family, kind, where
+        self.options = dict(options or {})
+        self.tap = FrameTap(keep)
+        self.frames: deque[dict[str, Any]] = deque(maxlen=keep)
+        self.gaps = 0  # times records were lost before they were read (the streams restarted)
+        self._spec = FAMILIES[family]
+        self._describe = importlib.import_module(f"adapters.{family}.describe")
+        self._streams: dict[tuple[str, int | None], StreamDecoder[bytes]] = {}
+        self._sent: dict[Any, str] = {}  # seq of a command sent -> its name (replies are described by it)
+        self._last = -1  # the last tap record read
+        self._numbers = itertools.count()
+        self._lock = threading.Lock()
+
+    # -- decoding -----------------------------------------------------------------------------------
+    def poll(self) -> list[dict[str, Any]]:
+        """Decode the records that arrived since the last call; returns the new frames (also kept)."""
+        with self._lock:
+            new: list[dict[str, Any]] = []
+            for n, t, direction, can_id, data in self.tap.snapshot():
+                if n <= self._last:
+                    continue
+                if self._last >= 0 and n != self._last + 1:
+                    self.gaps += 1
+                    self._streams.clear()  # a frame may have lost its middle: start again on a SOF
+                self._last = n
+                stream = self._streams.get((direction, can_id))
+                if stream is None:
+                    rules = _RawRules(self._spec.rules(self.options))
+                    stream = self._streams[(direction, can_id)] = StreamDecoder(rules)
+                for item in stream.feed(data):
+                    record = self._describe_one(item, direction)
+                    record.update(n=next(self._numbers), t=round(t, 6), dir=direction, can_id=can_id)
+                    self.frames.append(record)
+                    new.append(record)
+            return new
+
+    def _describe_one(self, item: bytes | BadFrame, direction: str) -> dict[str, Any]:
+        if isinstance(item, BadFrame):
+            return {
+                "protocol": self.family,
+                "valid": False,
+                "command": None,
+                "fields": None,
+                "error": item.reason,
+                "hex": item.raw.hex(),
+            }
+        options = self.options
+        record = self._describe.decode_bytes(item, **options)[0]
+        spec = self._spec
+        if spec.reply_flag is not None and spec.reply_option is not None:
+            key = record.get("seq")
+            if direction == "tx" and not record.get(spec.reply_flag) and record.get("command"):
+                self._sent[key] = str(record["command"])
+                if len(self._sent) > 512:
+                    self._sent.pop(next(iter(self._sent)))
+            elif direction == "rx" and record.get(spec.reply_flag) and key in self._sent:
+                answered = {**options, spec.reply_option: self._sent[key]}
+                record = self._describe.decode_bytes(item, **answered)[0]
+        record = dict(json_safe(record))
+        record["hex"] = item.hex()
+        return record
+
+    # -- downloads ------------------------------------------------------------------------------------
+    def candump(self, directions: Iterable[str] = ("rx", "tx")) -> str:
+        """The CAN frames held, as a ``candump -l`` log (``(time) channel ID#DATA``)."""
+        want = set(directions)
+        channel = "".join(ch for ch in self.where if not ch.isspace()) or "can0"
+        lines = [
+            f"({t:.6f}) {channel} {can_id:03X}#{data.hex().upper()}"
+            for _n, t, direction, can_id, data in self.tap.snapshot()
+            if direction in want and can_id is not None
+        ]
+        return "\n".join(lines) + ("\n" if lines else "")
+
+    def hex_lines(self, directions: Iterable[str] = ("rx", "tx")) -> str:
+        """The frames held, one per line as hex (``dji-gateway decode <family> -`` reads it back)."""
+        self.poll()
+        want = set(directions)
+        lines = [f["hex"].upper() for f in list(self.frames) if f["dir"] in want and f.get("valid")]
+        return "\n".join(lines) + ("\n" if lines else "")

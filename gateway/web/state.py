@@ -1,0 +1,235 @@
+"""What the web console shows of the gateway, read in one place.
+
+Owns :class:`ConsoleState`: the JSON document the page is pushed (every device with its link, online
+flag, traffic, errors, last-heard age, authority, firmware, ``osd``/``state`` bodies; the broker
+connection(s); the live-control session with its heartbeat history; the fly-to target), the tracks and
+home points the map draws, the frame inspectors and the journal. :meth:`ConsoleState.gather` runs **on
+the gateway's event loop** (the web server asks for it once per push tick, with a deadline), so it
+reads the live objects without locks; it must stay cheap (no I/O, no decoding).
+
+This is the only module of the console that reads adapter internals (the link object for the frame tap
+and its statistics through :func:`gateway.observability.link_stats`, the last-heard time, firmware
+attributes); when the adapter contract offers them (``link_stats()``, typed snapshots), they are
+switched here and nowhere else. Must not know HTTP or the page.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import asdict
+from typing import Any
+
+from adapters.base import Adapter
+from gateway.observability import VERSION, link_stats, safe_url
+from gateway.web.frames import FAMILIES, LinkInspector
+from gateway.web.journal import Journal
+
+__all__ = ["ConsoleState"]
+
+#: track points kept per device (the map's trail); a point is added when the device moved this far (m)
+TRACK_POINTS = 600
+TRACK_STEP_M = 0.5
+#: heartbeats sent with each push (the DRC panel's chart)
+HEARTBEAT_POINTS = 60
+_EARTH_M = 6_371_000.0
+
+
+def _distance_m(a: tuple[float, float], b: tuple[float, float]) -> float:
+    """Metres between two WGS84 points (equirectangular: exact enough for a trail)."""
+    lat = math.radians((a[0] + b[0]) / 2)
+    dy = math.radians(b[0] - a[0]) * _EARTH_M
+    dx = math.radians(b[1] - a[1]) * _EARTH_M * math.cos(lat)
+    return math.hypot(dx, dy)
+
+
+class ConsoleState:
+    """The console's view of one :class:`gateway.app.GatewayApp`."""
+
+    def __init__(
+        self, app: Any, *, frames: int, journal: int, clock: Callable[[], float] = time.monotonic
+    ) -> None:
+        self.app = app
+        self.journal = Journal(journal)
+        self._keep_frames = frames
+        self._clock = clock
+        self._started = clock()
+        self.inspectors: dict[str, LinkInspector] = {}
+        self.tracks: dict[str, deque[tuple[float, float]]] = {}
+        self.home: dict[str, tuple[float, float]] = {}
+
+    def attach(self) -> None:
+        """Start observing the app (on its loop, before it publishes): the journal hears every message,
+        every link gets its frame tap."""
+        self.app.published.append(self.journal.published)
+        self.app.received.append(self.journal.received)
+        for adapter in self.app.devices:
+            self._inspector(adapter)
+
+    # -- the frame inspector --------------------------------------------------------------------------
+    def _inspector(self, adapter: Adapter) -> LinkInspector | None:
+        sn = adapter.info.sn
+        inspector = self.inspectors.get(sn)
+        link = getattr(adapter, "_link", None)
+        if inspector is None:
+            settings = getattr(adapter, "settings", None)
+            family = str(getattr(settings, "type", ""))
+            stats = link_stats(adapter)
+            if family not in FAMILIES or stats is None:
+                return None
+            inspector = LinkInspector(
+                family=family,
+                kind=stats.kind,
+                where=stats.where,
+                keep=self._keep_frames,
+                options=_describe_options(family, settings),
+            )
+            self.inspectors[sn] = inspector
+        if link is not None and getattr(link, "observer", False) is None:
+            link.observer = inspector.tap  # the link exists from start(); a tap is attached once
+        return inspector
+
+    # -- the pushed document (the gateway's loop) ------------------------------------------------------
+    def gather(self) -> dict[str, Any]:
+        app = self.app
+        now = self._clock()
+        auth = app.devices.authority
+        devices = [self._device(adapter, auth, now) for adapter in app.devices]
+        drc = getattr(app, "drc", None)
+        return {
+            "gateway": {
+                "sn": app.settings.gateway_sn,
+                "version": VERSION,
+                "uptime_s": round(now - self._started, 1),
+                "started": bool(app.started.is_set()),
+                "brokers": self._brokers(),
+                "requests_in_flight": int(getattr(app.dispatcher, "in_flight", 0) or 0),
+            },
+            "devices": devices,
+            "drc": self._drc(drc),
+            "mission": self.journal.mission,
+            "t": round(time.time() * 1000),
+        }
+
+    def _device(self, adapter: Adapter, auth: Any, now: float) -> dict[str, Any]:
+        info = adapter.info
+        settings = getattr(adapter, "settings", None)
+        self._inspector(adapter)
+        stats = link_stats(adapter)
+        heard = getattr(adapter, "_last_heard", None)
+        osd = _plain(adapter.osd_snapshot())
+        state = _plain(adapter.state_snapshot())
+        firmware = (state or {}).get("firmware_version") or getattr(adapter, "firmware_version", None)
+        firmware = firmware or getattr(adapter, "version", None)
+        self._track(info.sn, osd)
+        flight = info.sn in auth.flight
+        payload = bool(info.payload_index and info.payload_index in auth.payloads)
+        return {
+            "sn": info.sn,
+            "family": str(getattr(settings, "type", type(adapter).__name__)),
+            "domain": info.domain,
+            "payload_index": info.payload_index,
+            "online": bool(adapter.online),
+            "last_heard_s": round(now - heard, 2)
+            if isinstance(heard, float) and math.isfinite(heard)
+            else None,
+            "link": asdict(stats) if stats is not None else None,
+            "authority": {
+                "flight": flight,
+                "payload": payload,
+                "holder": "gateway" if flight or payload else None,
+            },
+            "firmware": firmware,
+            "osd": osd,
+            "state": state,
+            "home": self.home.get(info.sn),
+        }
+
+    def _track(self, sn: str, osd: dict[str, Any] | None) -> None:
+        """The trail and the home point: where the aircraft was last seen on the ground."""
+        if not osd:
+            return
+        if isinstance(osd.get("latitude"), float | int) and isinstance(osd.get("longitude"), float | int):
+            point = (float(osd["latitude"]), float(osd["longitude"]))
+            if float(osd.get("elevation") or 0.0) < 0.3:
+                self.home[sn] = point
+            step = _distance_m
+        elif isinstance(osd.get("x_position"), dict):
+            pos = osd["x_position"]
+            point = (float(pos.get("x", 0.0)), float(pos.get("y", 0.0)))
+
+            def step(a: tuple[float, float], b: tuple[float, float]) -> float:
+                return math.hypot(a[0] - b[0], a[1] - b[1])
+        else:
+            return
+        track = self.tracks.setdefault(sn, deque(maxlen=TRACK_POINTS))
+        if not track or step(track[-1], point) >= TRACK_STEP_M:
+            track.append(point)
+
+    def _brokers(self) -> list[dict[str, Any]]:
+        """The main broker connection (with its nodes when the broker is a cluster: the node it is on),
+        and a DRC session's own connection when it has one."""
+        app = self.app
+        out = []
+        bridge = app.bridge
+        if bridge is not None:
+            nodes = [safe_url(u) for u in app.settings.broker.urls]
+            current = getattr(bridge, "current", None)
+            out.append(
+                {
+                    "name": "main",
+                    "url": safe_url(current.url) if current is not None else nodes[0],
+                    "nodes": nodes,
+                    "connected": bool(bridge.connected),
+                    "subscribed": bool(bridge.subscribed),
+                }
+            )
+        drc = getattr(app, "drc", None)
+        dedicated = drc.dedicated_link if drc is not None else None
+        if dedicated is not None:
+            out.append(
+                {
+                    "name": "drc",
+                    "url": "(drc_mode_enter)",
+                    "connected": bool(dedicated.connected),
+                    "subscribed": bool(dedicated.subscribed),
+                }
+            )
+        return out
+
+    def _drc(self, drc: Any) -> dict[str, Any]:
+        if drc is None:
+            return {"state": 0, "active": False, "heartbeats": []}
+        view = dict(drc.snapshot())
+        beats = list(drc.heartbeats)[-HEARTBEAT_POINTS:]
+        view["heartbeats"] = [[received, received - sent] for received, sent in beats]
+        view["failsafe_at"] = drc.failsafe[1] if drc.failsafe is not None else None
+        view["failsafe_reason"] = drc.failsafe[0] if drc.failsafe is not None else None
+        return view
+
+    def track_view(self) -> dict[str, Any]:
+        """The trails and home points (the page asks once; pushes keep it current)."""
+        return {"tracks": {sn: list(t) for sn, t in self.tracks.items()}, "home": dict(self.home)}
+
+
+def _plain(body: Any) -> dict[str, Any] | None:
+    return dict(body) if body else None
+
+
+def _describe_options(family: str, settings: Any) -> dict[str, Any]:
+    """The ``dji-gateway decode`` options that match how this device's link is configured."""
+    if family == "osdk":
+        return {"firmware": settings.firmware}
+    if family == "robomaster":
+        control = settings.control
+        return {
+            "season": settings.season,
+            "max_data_len": settings.max_data_len,
+            "control_cmd_id": control.cmd_id,
+            "control_data_cmd_id": control.data_cmd_id,
+            "control_sender_id": control.sender_id,
+            "control_receiver_id": control.receiver_id,
+        }
+    return {}

@@ -1,0 +1,36 @@
+// The console's HTTP calls: JSON in and out, the CSRF token of the sign-in session on every change.
+let csrf = null;
+
+export class HttpError extends Error {
+  constructor(status, message) {
+    super(message);
+    this.status = status;
+  }
+}
+
+export function setCsrf(value) {
+  csrf = value;
+}
+
+async function parse(response) {
+  let body = null;
+  try {
+    body = await response.json();
+  } catch {
+    body = null;
+  }
+  if (!response.ok) throw new HttpError(response.status, (body && body.error) || response.statusText);
+  return body;
+}
+
+export async function get(path) {
+  return parse(await fetch(path, { credentials: "same-origin", cache: "no-store" }));
+}
+
+export async function send(method, path, body) {
+  const headers = { "Content-Type": "application/json" };
+  if (csrf) headers["X-CSRF-Token"] = csrf;
+  const init = { method, headers, credentials: "same-origin" };
+  if (body !== undefined) init.body = JSON.stringify(body);
+  return parse(await fetch(path, init));
+}

@@ -1,0 +1,56 @@
+// Devices panel: every device's link, traffic, errors, authority and firmware; the broker connection(s).
+import { $, h, clear, fmt } from "./dom.js";
+
+const rows = new Map();
+
+function cells(device) {
+  const link = device.link || {};
+  const online = h("td", {}, h("span", { class: device.online ? "dot on" : "dot" }), device.online ? "online" : "offline");
+  const authority = device.authority.holder
+    ? [device.authority.flight ? "flight" : null, device.authority.payload ? "payload" : null].filter(Boolean).join(" + ") + " (A)"
+    : "—";
+  return [
+    h("td", { class: "mono" }, device.sn, device.payload_index ? ` · ${device.payload_index}` : ""),
+    h("td", {}, device.family),
+    h("td", { class: "mono" }, device.link ? `${link.kind} ${link.where}${link.up ? "" : " (down)"}` : "—"),
+    online,
+    h("td", { class: "mono" }, fmt(link.frames_in)),
+    h("td", { class: "mono" }, fmt(link.frames_out)),
+    h("td", { class: "mono" }, fmt(link.crc_errors)),
+    h("td", { class: "mono" }, fmt(link.framing_errors)),
+    h("td", { class: "mono" }, device.last_heard_s === null ? "never" : `${fmt(device.last_heard_s)} s ago`),
+    h("td", {}, authority),
+    h("td", { class: "mono" }, device.firmware || "—"),
+  ];
+}
+
+export function render(state) {
+  const body = $("#device-table tbody");
+  const seen = new Set();
+  for (const device of state.devices) {
+    seen.add(device.sn);
+    let row = rows.get(device.sn);
+    if (!row) {
+      row = h("tr", { "data-sn": device.sn });
+      rows.set(device.sn, row);
+      body.append(row);
+    }
+    row.dataset.online = String(device.online);
+    row.replaceChildren(...cells(device));
+  }
+  for (const [sn, row] of rows) {
+    if (!seen.has(sn)) {
+      row.remove();
+      rows.delete(sn);
+    }
+  }
+  const brokers = clear($("#brokers"));
+  for (const b of state.gateway.brokers) {
+    brokers.append(
+      h("span", { class: b.connected ? "pill on" : "pill off", "data-broker": b.name },
+        `${b.name} broker ${b.url}: ${b.connected ? (b.subscribed ? "connected" : "connected, subscribing") : "disconnected"}`
+        + (b.nodes && b.nodes.length > 1 ? ` (nodes: ${b.nodes.join(", ")})` : "")),
+    );
+  }
+  brokers.append(h("span", { class: "muted" }, `gateway ${state.gateway.sn} · v${state.gateway.version} · up ${fmt(state.gateway.uptime_s, 0)} s · ${state.gateway.requests_in_flight} request(s) in flight`));
+}
