@@ -5,6 +5,9 @@ from __future__ import annotations
 import asyncio
 import json
 import queue
+import re
+import signal
+import subprocess
 import threading
 import time
 import uuid
@@ -432,3 +435,47 @@ class DrcSticks:
     def close(self) -> None:
         self._stop.set()
         self._thread.join(2)
+
+
+class Proc:
+    """A child process with its output collected by a thread."""
+
+    def __init__(self, name: str, argv: list[str], env: dict[str, str]) -> None:
+        self.name = name
+        self.lines: list[str] = []
+        self.proc = subprocess.Popen(
+            argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, start_new_session=True
+        )
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip("\n"))
+
+    def wait_for_line(self, pattern: str, timeout: float = 10.0) -> re.Match[str]:
+        regex = re.compile(pattern)
+
+        def find() -> re.Match[str] | None:
+            if self.proc.poll() is not None and not self._reader.is_alive():
+                raise AssertionError(f"{self.name} exited: {self.output()[-1500:]}")
+            return next((m for line in list(self.lines) if (m := regex.search(line))), None)
+
+        return wait_until(find, timeout, what=f"{pattern!r} from {self.name}")
+
+    def output(self) -> str:
+        return "\n".join(self.lines)
+
+    def stop(self, sig: int = signal.SIGTERM, timeout: float = 15.0) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+        self._reader.join(5)
+        if self.proc.stdout:
+            self.proc.stdout.close()
+        return int(self.proc.returncode)

@@ -12,7 +12,6 @@ import json
 import os
 import re
 import shlex
-import signal
 import subprocess
 import sys
 import threading
@@ -34,7 +33,7 @@ from gateway.cli import main as cli_main
 from gateway.local_broker import find_mosquitto, free_port, port_open
 from gateway.mqtt import close_client
 from gateway.settings import load_settings
-from tests.support import CloudClient, wait_until
+from tests.support import CloudClient, Proc, wait_until
 from tests.support import docker_compose as docker_compose_client
 
 REPO = Path(__file__).resolve().parents[1]
@@ -167,50 +166,6 @@ def test_check_config_masks_secrets_and_names_a_bad_field(
 
 
 # ------------------------------------------------------------------------------------------ the stack, here
-class Proc:
-    """A child process with its output collected by a thread."""
-
-    def __init__(self, name: str, argv: list[str], env: dict[str, str]) -> None:
-        self.name = name
-        self.lines: list[str] = []
-        self.proc = subprocess.Popen(
-            argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, start_new_session=True
-        )
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            self.lines.append(line.rstrip("\n"))
-
-    def wait_for_line(self, pattern: str, timeout: float = 10.0) -> re.Match[str]:
-        regex = re.compile(pattern)
-
-        def find() -> re.Match[str] | None:
-            if self.proc.poll() is not None and not self._reader.is_alive():
-                raise AssertionError(f"{self.name} exited: {self.output()[-1500:]}")
-            return next((m for line in list(self.lines) if (m := regex.search(line))), None)
-
-        return wait_until(find, timeout, what=f"{pattern!r} from {self.name}")
-
-    def output(self) -> str:
-        return "\n".join(self.lines)
-
-    def stop(self, sig: int = signal.SIGTERM, timeout: float = 15.0) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
-        self._reader.join(5)
-        if self.proc.stdout:
-            self.proc.stdout.close()
-        return int(self.proc.returncode)
-
-
 def _interpolate(value: str, env: dict[str, str]) -> str:
     """Compose's ${VAR:-default}, as `docker compose` would resolve it with ``env`` as the .env file."""
     return re.sub(r"\$\{(\w+):-([^}]*)\}", lambda m: env.get(m.group(1), m.group(2)), value)

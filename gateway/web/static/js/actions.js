@@ -36,8 +36,6 @@ export function setAllowed(value, session) {
         : "Sign in with the console token to send actions.";
 }
 
-export function devicesState() {}
-
 function showMethods() {
   const entry = entries().find((e) => e.sn === $("#action-device").value);
   const select = clear($("#action-method"));
@@ -81,11 +79,11 @@ async function submit() {
     return;
   }
   $("#action-result").textContent = `sending ${method.method} …`;
+  $("#action-result").dataset.method = method.method;
   try {
     const out = await send("POST", "/api/action", { method: method.method, data: value, confirm: method.moves });
     $("#action-result").textContent = `${method.method}: result ${out.result}${out.output ? `\n${JSON.stringify(out.output, null, 2)}` : ""}`;
     $("#action-result").dataset.result = String(out.result);
-    $("#action-result").dataset.method = method.method;
     toast(`${method.method}: result ${out.result}`, out.result !== 0);
   } catch (err) {
     $("#action-result").textContent = `${method.method} refused (${err.status}): ${err.message}`;

@@ -9,7 +9,7 @@ import * as frames from "./frames.js";
 import * as journal from "./journal.js";
 import * as actions from "./actions.js";
 
-const ctx = { session: null, catalog: null, ws: null, state: null, retry: 500 };
+const ctx = { session: null, catalog: null, ws: null, state: null, retry: 500, drawing: false };
 
 function showSession() {
   const s = ctx.session || {};
@@ -49,6 +49,16 @@ async function loadCatalog() {
   return true;
 }
 
+function draw() {
+  ctx.drawing = false;
+  const msg = ctx.state;
+  devices.render(msg);
+  map.render(msg);
+  instruments.render(msg);
+  drc.render(msg.drc);
+  frames.links(msg.devices);
+}
+
 function connect() {
   const url = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/api/ws`;
   const ws = new WebSocket(url);
@@ -63,13 +73,13 @@ function connect() {
   ws.onmessage = (event) => {
     const msg = JSON.parse(event.data);
     if (msg.type === "state") {
+      // draw at most once per frame, the newest state (pushes may come faster than a busy page draws)
+      const first = !ctx.state;
       ctx.state = msg;
-      devices.render(msg);
-      map.render(msg);
-      instruments.render(msg);
-      drc.render(msg.drc);
-      frames.links(msg.devices);
-      actions.devicesState(msg);
+      if (first || !ctx.drawing) {
+        ctx.drawing = true;
+        requestAnimationFrame(draw);
+      }
       pill.textContent = "live";
       pill.className = "pill on";
     } else if (msg.type === "stalled") {

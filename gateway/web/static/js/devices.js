@@ -2,6 +2,8 @@
 import { $, h, clear, fmt } from "./dom.js";
 
 const rows = new Map();
+const drawn = new Map(); // sn -> what the row shows (redrawn only when it changes)
+let brokersDrawn = "";
 
 function cells(device) {
   const link = device.link || {};
@@ -35,6 +37,9 @@ export function render(state) {
       rows.set(device.sn, row);
       body.append(row);
     }
+    const key = JSON.stringify([device.link, device.online, device.last_heard_s, device.authority, device.firmware]);
+    if (drawn.get(device.sn) === key) continue;
+    drawn.set(device.sn, key);
     row.dataset.online = String(device.online);
     row.replaceChildren(...cells(device));
   }
@@ -42,8 +47,12 @@ export function render(state) {
     if (!seen.has(sn)) {
       row.remove();
       rows.delete(sn);
+      drawn.delete(sn);
     }
   }
+  const key = JSON.stringify([state.gateway.brokers, Math.round(state.gateway.uptime_s), state.gateway.requests_in_flight]);
+  if (key === brokersDrawn) return;
+  brokersDrawn = key;
   const brokers = clear($("#brokers"));
   for (const b of state.gateway.brokers) {
     brokers.append(

@@ -62,8 +62,13 @@ function chart(beats) {
   canvas.dataset.points = String(beats.length);
 }
 
+let drawn = "";
+
 export function render(d) {
   if (!d) return;
+  const key = JSON.stringify(d);
+  if (key === drawn) return;
+  drawn = key;
   const dl = $("#drc-facts");
   dl.replaceChildren(...facts(d).flatMap(([k, v]) => [h("dt", {}, k), h("dd", {}, v)]));
   dl.dataset.state = String(d.state);

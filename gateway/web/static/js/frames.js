@@ -70,13 +70,28 @@ export function add(msg) {
   records.push(...msg.records);
   if (records.length > keep) records = records.slice(records.length - keep);
   link();
-  draw();
+  if (msg.reset) draw();
+  else prepend(msg.records);
 }
 
-function visible() {
+/** New frames on top of the table (no redraw of what is there). */
+function prepend(fresh) {
+  const body = $("#frame-table tbody");
+  const rows = fresh.filter(matches()).map(row).reverse();
+  body.prepend(...rows);
+  while (body.rows.length > SHOWN) body.deleteRow(body.rows.length - 1);
+  count();
+}
+
+function count() {
+  const shown = records.filter(matches()).length;
+  $("#frame-count").textContent = sn ? `${shown} of ${records.length} frames kept (at most ${keep})${paused ? " · paused" : ""}` : "";
+}
+
+function matches() {
   const filter = $("#frame-filter").value.trim().toLowerCase();
   const dirs = { rx: $("#frame-dir-rx").checked, tx: $("#frame-dir-tx").checked };
-  return records.filter((r) => dirs[r.dir] && (!filter || String(r.command || r.error || "").toLowerCase().includes(filter)));
+  return (r) => dirs[r.dir] && (!filter || String(r.command || r.error || "").toLowerCase().includes(filter));
 }
 
 function summary(r) {
@@ -85,24 +100,26 @@ function summary(r) {
   return r.error || r.payload || "";
 }
 
+function row(r) {
+  const tr = h("tr", { "data-command": r.command || "", "data-dir": r.dir, "data-n": r.n, class: selected === r.n ? "sel" : "" },
+    h("td", { class: "mono" }, time(r.t * 1000)),
+    h("td", {}, r.dir),
+    h("td", { class: "mono" }, r.can_id == null ? "" : r.can_id.toString(16).toUpperCase()),
+    h("td", { class: "mono" }, r.command || (r.valid ? "?" : "bad")),
+    h("td", { class: "mono" }, r.seq ?? ""),
+    h("td", { class: "mono fields" }, h("div", { class: "clamp" }, summary(r))));
+  tr.addEventListener("click", () => {
+    selected = r.n;
+    for (const el of document.querySelectorAll("#frame-table tr.sel")) el.classList.remove("sel");
+    tr.classList.add("sel");
+    const hex = (r.hex || "").toUpperCase().match(/.{1,2}/g) || [];
+    $("#frame-detail").textContent = `${r.dir} ${r.command || ""}\nhex: ${hex.join(" ")}\n\n${JSON.stringify(r, null, 2)}`;
+  });
+  return tr;
+}
+
 function draw() {
-  const body = $("#frame-table tbody");
-  const rows = visible();
-  $("#frame-count").textContent = sn ? `${rows.length} of ${records.length} frames kept (at most ${keep})${paused ? " · paused" : ""}` : "";
-  const shown = rows.slice(-SHOWN).reverse();
-  body.replaceChildren(...shown.map((r) => {
-    const tr = h("tr", { "data-command": r.command || "", "data-dir": r.dir, class: selected === r.n ? "sel" : "" },
-      h("td", { class: "mono" }, time(r.t * 1000)),
-      h("td", {}, r.dir),
-      h("td", { class: "mono" }, r.can_id == null ? "" : r.can_id.toString(16).toUpperCase()),
-      h("td", { class: "mono" }, r.command || (r.valid ? "?" : "bad")),
-      h("td", { class: "mono" }, r.seq ?? ""),
-      h("td", { class: "mono fields" }, summary(r)));
-    tr.addEventListener("click", () => {
-      selected = r.n;
-      $("#frame-detail").textContent = `${r.dir} ${r.command || ""}\nhex: ${r.hex.toUpperCase().match(/.{1,2}/g).join(" ")}\n\n${JSON.stringify(r, null, 2)}`;
-      draw();
-    });
-    return tr;
-  }));
+  const rows = records.filter(matches()).slice(-SHOWN).reverse();
+  $("#frame-table tbody").replaceChildren(...rows.map(row));
+  count();
 }

@@ -3,6 +3,7 @@
 import { $, h, s, clear, fmt } from "./dom.js";
 
 const cards = new Map();
+const drawn = new Map(); // sn -> the osd the card shows
 
 function dial(label, value, { min = -180, max = 180, full = true } = {}) {
   const svg = s("svg", { viewBox: "0 0 130 130", class: "dial-svg", "data-label": label });
@@ -41,7 +42,8 @@ function horizon(pitch, roll, label = "attitude") {
       s("line", { x1: -60, y1: 65, x2: 190, y2: 65, class: "horizon" })));
   svg.append(defs, g, s("circle", { cx: 65, cy: 65, r: 52, class: "dial", fill: "none" }),
     s("path", { d: "M35,65 L55,65 L60,72 L65,65 L70,72 L75,65 L95,65", class: "wing" }),
-    s("text", { x: 65, y: 124, "text-anchor": "middle", class: "value", text: `P ${fmt(pitch)}° R ${fmt(roll)}°` }));
+    s("text", { x: 65, y: 124, "text-anchor": "middle", class: "value",
+      text: label === "roll" ? `roll ${fmt(roll)}°` : `P ${fmt(pitch)}° R ${fmt(roll)}°` }));
   return svg;
 }
 
@@ -110,18 +112,20 @@ export function render(state) {
   for (const d of state.devices) {
     const o = d.osd;
     if (!o) continue;
-    let card = null;
-    if (typeof o.gimbal_yaw === "number") card = gimbalCard(d);
-    else if (typeof o.latitude === "number") card = aircraftCard(d);
-    else if (o.x_hp !== undefined || o.x_position) card = robotCard(d);
-    if (!card) continue;
+    const kind = typeof o.gimbal_yaw === "number" ? gimbalCard : typeof o.latitude === "number" ? aircraftCard
+      : o.x_hp !== undefined || o.x_position ? robotCard : null;
+    if (!kind) continue;
+    const key = JSON.stringify(o);
     seen.add(d.sn);
+    if (drawn.get(d.sn) === key) continue;
+    drawn.set(d.sn, key);
+    const card = kind(d);
     const old = cards.get(d.sn);
     if (old) old.replaceWith(card);
     else list.append(card);
     cards.set(d.sn, card);
   }
-  for (const [sn, card] of cards) if (!seen.has(sn)) { card.remove(); cards.delete(sn); }
+  for (const [sn, card] of cards) if (!seen.has(sn)) { card.remove(); cards.delete(sn); drawn.delete(sn); }
   if (!cards.size && !list.firstChild) list.append(h("p", { class: "muted" }, "no telemetry yet"));
   else for (const p of list.querySelectorAll("p.muted")) p.remove();
   void clear;

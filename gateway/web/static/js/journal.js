@@ -22,7 +22,7 @@ export function add(entries) {
       h("td", {}, e.kind || ""),
       h("td", { class: "mono" }, e.method || ""),
       h("td", { class: "mono" }, String(result)),
-      h("td", { class: "mono fields" }, detail(e)));
+      h("td", { class: "mono fields" }, h("div", { class: "clamp", title: detail(e) }, detail(e))));
     body.prepend(row);
   }
   while (body.rows.length > KEEP) body.deleteRow(body.rows.length - 1);

@@ -130,7 +130,7 @@ function renderAircraftMap(state) {
   svg.append(s("circle", { cx: hx, cy: hy, r: 7, class: "home" }), s("text", { x: hx + 9, y: hy + 4, text: "H" }));
   for (const d of aircraft) {
     const trail = (tracks.get(d.sn) || []).map((p) => view.px(local(p)).map((v) => v.toFixed(1)).join(",")).join(" ");
-    if (trail) svg.append(s("polyline", { points: trail, class: "track" }));
+    if (trail.includes(" ")) svg.append(s("polyline", { points: trail, class: "track" }));
   }
   let from = aircraft.length ? view.px(local([aircraft[0].osd.latitude, aircraft[0].osd.longitude])) : [hx, hy];
   for (const g of goals) {
@@ -168,7 +168,7 @@ function renderField(state) {
     remember(d.sn, p, true);
     const px = (q) => [ox + q[0] * k, oy + FIELD.width * k - q[1] * k];
     const trail = (tracks.get(d.sn) || []).map((q) => px(q).map((v) => v.toFixed(1)).join(",")).join(" ");
-    if (trail) svg.append(s("polyline", { points: trail, class: "track robot" }));
+    if (trail.includes(" ")) svg.append(s("polyline", { points: trail, class: "track robot" }));
     const [x, y] = px(p);
     const heading = Number(d.osd.attitude_head || 0);
     svg.append(s("g", { transform: `translate(${x.toFixed(1)},${y.toFixed(1)}) rotate(${heading.toFixed(1)})` },
@@ -179,7 +179,13 @@ function renderField(state) {
   }
 }
 
+let drawn = "";
+
 export function render(state) {
+  const key = JSON.stringify([state.mission, state.devices.map((d) => d.osd && [d.osd.latitude, d.osd.longitude,
+    d.osd.attitude_head, d.osd.elevation, d.osd.x_position, d.home])]);
+  if (key === drawn) return;
+  drawn = key;
   renderAircraftMap(state);
   renderField(state);
   const m = state.mission;

@@ -1,0 +1,363 @@
+"""The web console in a real browser: Debian's Chromium driven by Playwright against ``dji-gateway run
+--simulate`` as its own process, with a real mosquitto.
+
+The walkthrough is the README's, done in the page: its ``dji-gateway send`` lines (read from README.md)
+become form submissions — grab payload authority, aim the camera (the gimbal dial reaches 28°), the frame
+inspector shows the position-control frame on the CAN link, grab flight authority, take off (the
+aircraft moves on the map) — then live flight control is entered from the page and a cloud's heartbeats
+show in the DRC panel, and the emergency-stop button stops everything. Before signing in, an action and the
+emergency stop are refused (401) and the refusals are in the audit log.
+
+Screenshots: set ``DJIGW_SCREENSHOTS=docs/console`` to write the walkthrough's pictures there (they are
+committed and shown in the README); otherwise they go to the test's temporary directory and are only
+checked not to be blank. Never ``playwright install``: the browser is /usr/bin/chromium (``make test``
+installs it with apt-get), and the test is skipped, saying why, where it cannot run.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shlex
+import struct
+import sys
+import tempfile
+import time
+import urllib.request
+import zlib
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from gateway.codec_cli import parse_assignments
+from gateway.local_broker import LocalBroker
+from tests.support import CloudClient, Proc, wait_until
+from tests.test_readme_walkthrough import walkthrough
+
+pytestmark = [pytest.mark.browser, pytest.mark.broker, pytest.mark.timeout(300)]
+
+CHROMIUM = Path(os.environ.get("DJIGW_CHROMIUM", "/usr/bin/chromium"))
+TOKEN = "console-test-token-0123456789"
+GW = "DJIGW-SIM-0001"
+#: Chromium as root on a closed network: no sandbox, no GPU, no QUIC, and none of the background
+#: connections (update checks, sync, component downloads) that this network refuses.
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+
+
+def png_is_blank(data: bytes) -> bool:
+    """True when a PNG's pixels hold at most two distinct byte values (a page that drew nothing)."""
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", "not a PNG"
+    pos, idat = 8, b""
+    while pos < len(data):
+        (length,) = struct.unpack(">I", data[pos : pos + 4])
+        kind = data[pos + 4 : pos + 8]
+        if kind == b"IDAT":
+            idat += data[pos + 8 : pos + 8 + length]
+        pos += 12 + length
+    return len(set(zlib.decompress(idat))) <= 2
+
+
+@pytest.fixture(scope="module")
+def chromium() -> Iterator[Any]:
+    """One headless Chromium (Playwright's persistent context: a fresh --user-data-dir)."""
+    if not CHROMIUM.exists():
+        pytest.skip(f"{CHROMIUM} is missing: install Debian's chromium (make test does, as root)")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError as exc:  # pragma: no cover - the dev extras install it
+        pytest.skip(f"playwright is not installed ({exc}): pip install -e '.[dev]'")
+    with tempfile.TemporaryDirectory(prefix="djigw-chromium-") as profile, sync_playwright() as pw:
+        try:
+            context = pw.chromium.launch_persistent_context(
+                profile,
+                executable_path=str(CHROMIUM),
+                headless=True,
+                args=CHROMIUM_ARGS,
+                viewport={"width": 1400, "height": 1000},
+            )
+        except Exception as exc:
+            pytest.skip(f"Chromium at {CHROMIUM} does not start here: {exc}")
+        try:
+            yield context
+        finally:
+            context.close()
+
+
+@pytest.fixture(scope="module")
+def gateway() -> Iterator[dict[str, Any]]:
+    """``dji-gateway run --simulate`` with the console token in its environment, on any free port."""
+    broker = LocalBroker(0).start()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("DJIGW_")}
+    env.update(DJIGW_CONSOLE__TOKEN=TOKEN, PYTHONUNBUFFERED="1")
+    argv = [str(Path(sys.executable).parent / "dji-gateway"), "run", "--simulate", "--broker", broker.url,
+            "--metrics-port", "0"]  # fmt: skip
+    proc = Proc("gateway", argv, env)
+    try:
+        port = int(proc.wait_for_line(r"web console on http://127\.0\.0\.1:(\d+)/", 20).group(1))
+        proc.wait_for_line(r"running with 3 device\(s\)", 20)
+        yield {"url": f"http://127.0.0.1:{port}", "broker": broker, "proc": proc}
+    finally:
+        code = proc.stop(timeout=20)
+        broker.stop()
+        assert code == 0, proc.output()[-3000:]
+        assert "Traceback" not in proc.output(), proc.output()[-3000:]
+        assert TOKEN not in proc.output(), "the console token reached a log line"
+
+
+def _shots(tmp_path: Path) -> Path:
+    where = os.environ.get("DJIGW_SCREENSHOTS")
+    path = Path(where) if where else tmp_path
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _shoot(locator: Any, path: Path) -> None:
+    locator.screenshot(path=str(path))
+    assert not png_is_blank(path.read_bytes()), f"{path.name} is blank"
+
+
+def test_the_page_shows_the_simulated_devices_within_8_s(
+    chromium: Any, gateway: dict[str, Any], tmp_path: Path
+) -> None:
+    page = chromium.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    try:
+        started = time.monotonic()
+        page.goto(gateway["url"] + "/")
+        for sn in ("RSDK-SIM-0001", "OSDK-SIM-0001", "RM-SIM-0001"):
+            page.wait_for_selector(f'#device-table tr[data-sn="{sn}"][data-online="true"]', timeout=8000)
+        # the map, the field and the instruments are drawn (SVG), the DRC chart too (canvas)
+        page.wait_for_selector("#map-svg .aircraft-mark", timeout=8000)
+        page.wait_for_selector("#field-svg circle.robot", timeout=8000)
+        page.wait_for_selector(
+            '.instrument.gimbal[data-sn="RSDK-SIM-0001"] svg line.needle', state="attached", timeout=8000
+        )
+        assert time.monotonic() - started < 8.0
+        shot = tmp_path / "first-load.png"
+        page.screenshot(path=str(shot))
+        assert not png_is_blank(shot.read_bytes())
+        assert not errors, errors
+    finally:
+        page.close()
+
+
+def _device_for(catalog: dict[str, Any], method: str, fields: dict[str, Any]) -> str:
+    """The form the README's line belongs to: the payload it names, else the device that serves it."""
+    if method in {m["method"] for m in catalog["gateway"]["methods"]}:
+        return str(catalog["gateway"]["sn"])
+    for device in catalog["devices"]:
+        if "payload_index" in fields and device["prefill"].get("payload_index") != fields["payload_index"]:
+            continue
+        if method in {m["method"] for m in device["methods"]}:
+            return str(device["sn"])
+    raise AssertionError(f"no form offers {method} {fields}")
+
+
+def _flatten(fields: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in fields.items():
+        if isinstance(value, dict):
+            out.update(_flatten(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def _nest(fields: dict[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in fields.items():
+        *parents, last = key.split(".")
+        at = out
+        for p in parents:
+            at = at.setdefault(p, {})
+        at[last] = value
+    return out
+
+
+def _send_from_page(page: Any, device: str, method: str, fields: dict[str, Any]) -> str:
+    """Choose the device and method, type the fields into the generated form, send (confirming when the
+    page asks), and return the result the page shows."""
+    page.select_option("#action-device", device)
+    page.select_option("#action-method", method)
+    for name, value in _flatten(fields).items():
+        field = page.locator(f'#action-form [name="{name}"]')
+        if field.evaluate("e => e.tagName") == "SELECT":
+            field.select_option(label=json.dumps(value) if isinstance(value, bool) else str(value))
+        else:
+            field.fill(str(value))
+    page.evaluate("() => { const r = document.querySelector('#action-result'); delete r.dataset.result; }")
+    page.click("#action-send")
+    moves = page.locator("#confirm").evaluate("d => d.open")
+    if moves:
+        page.click("#confirm-ok")
+    page.wait_for_selector(f'#action-result[data-method="{method}"][data-result]', timeout=15000)
+    return str(page.get_attribute("#action-result", "data-result"))
+
+
+def _number(page: Any, selector: str, attribute: str) -> float:
+    """A numeric data attribute the page sets (NaN while it is not there yet)."""
+    try:
+        return float(page.get_attribute(selector, attribute) or "nan")
+    except ValueError:
+        return float("nan")
+
+
+def _audit(proc: Proc) -> list[dict[str, Any]]:
+    """The audit records the gateway logged (one JSON object per line, after the logger's prefix)."""
+    out = []
+    for line in proc.output().splitlines():
+        if "dji_gateway.audit" in line:
+            out.append(json.loads(line[line.index("{") :]))
+    return out
+
+
+def test_the_readme_walkthrough_in_the_page(chromium: Any, gateway: dict[str, Any], tmp_path: Path) -> None:
+    shots = _shots(tmp_path)
+    url, proc, broker = gateway["url"], gateway["proc"], gateway["broker"]
+    with urllib.request.urlopen(url + "/api/catalog", timeout=5) as resp:
+        catalog = json.load(resp)
+    page = chromium.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    cloud = CloudClient(broker.host, broker.port, GW)
+    try:
+        page.goto(url + "/")
+        page.wait_for_selector('#device-table tr[data-sn="OSDK-SIM-0001"][data-online="true"]', timeout=10000)
+        # the inspector watches the gimbal's CAN link from the start
+        page.select_option("#frame-link", "RSDK-SIM-0001")
+
+        # not signed in: the emergency stop and an action are refused, and audited
+        page.click("#estop")
+        page.wait_for_selector("#toast div.bad >> text=emergency stop refused", timeout=5000)
+        page.select_option("#action-device", "RSDK-SIM-0001")
+        page.select_option("#action-method", "payload_authority_grab")
+        page.evaluate("() => { document.querySelector('#action-send').disabled = false; }")
+        page.click("#action-send")
+        page.wait_for_selector('#action-result[data-result="http 401"]', timeout=5000)
+        wait_until(lambda: len([r for r in _audit(proc) if r.get("status") == 401]) >= 2, 5, what="audited")
+        refused = [r for r in _audit(proc) if r.get("status") == 401]
+        assert {r["event"] for r in refused} == {"console_action", "console_emergency_stop"}
+        assert all(r["result"] == "refused" and "@127.0.0.1" in r["who"] for r in refused)
+
+        # sign in with the token
+        page.fill("#token", TOKEN)
+        page.click("#signin button")
+        page.wait_for_selector("#signedin:not([hidden])", timeout=5000)
+
+        # the README's walkthrough, line by line, in the page
+        sends = []
+        for command in walkthrough()[3]:
+            words = shlex.split(command)
+            if words[:2] != ["dji-gateway", "send"]:
+                continue
+            method = words[2]
+            fields = parse_assignments([w for w in words[3:] if "=" in w and not w.startswith("--")])
+            sends.append((method, fields))
+        assert [m for m, _ in sends] == [
+            "payload_authority_grab", "camera_aim", "flight_authority_grab", "takeoff_to_point",
+        ]  # fmt: skip
+        gimbal = '.instrument.gimbal[data-sn="RSDK-SIM-0001"]'
+        for method, fields in sends:
+            result = _send_from_page(page, _device_for(catalog, method, fields), method, _nest(fields))
+            assert result == "0", (method, result, page.inner_text("#action-result"))
+            if method == "camera_aim":
+                # the gimbal dial reaches the new yaw (0.4 of the 70° field of view: 28°)
+                wait_until(
+                    lambda: abs(_number(page, gimbal, "data-yaw") - 28.0) < 1.0,
+                    10,
+                    what="the gimbal instrument at 28°",
+                )
+                _shoot(page.locator("#instruments"), shots / "instruments-gimbal.png")
+                # the frame inspector shows the position-control frame the gateway sent
+                page.fill("#frame-filter", "position_control")
+                row = page.locator('#frame-table tr[data-command="position_control"][data-dir="tx"]').first
+                row.wait_for(timeout=10000)
+                row.click()
+                assert "position_control" in page.inner_text("#frame-detail")
+                assert "AA " in page.inner_text("#frame-detail")  # the hex, from the R SDK SOF on
+                _shoot(page.locator("#frames"), shots / "frame-inspector.png")
+                page.fill("#frame-filter", "")
+        # the aircraft takes off and flies north on the map
+        wait_until(
+            lambda: _number(page, "#map-svg", "data-aircraft-north") > 10.0,
+            90,
+            what="the aircraft moving north on the map",
+        )
+        assert _number(page, "#map-svg", "data-aircraft-elevation") > 5.0
+        _shoot(page.locator("#map"), shots / "map-takeoff.png")
+        page.wait_for_selector('#log-table tr[data-method="takeoff_to_point_progress"]', timeout=10000)
+
+        # live flight control from the page; the cloud's heartbeats show in the DRC panel
+        enter = {"mqtt_broker.username": "u", "mqtt_broker.password": "p"}
+        assert _send_from_page(page, GW, "drc_mode_enter", _nest(enter)) == "0"
+        for seq in range(1, 16):
+            body = {"method": "heart_beat", "data": {"seq": seq, "timestamp": int(time.time() * 1000)}}
+            cloud.publish(f"thing/product/{GW}/drc/down", body, qos=0)
+            time.sleep(0.1)
+        try:
+            page.wait_for_selector('#drc-facts[data-state="2"]', timeout=10000)
+        except Exception:
+            print("DEBUG", page.inner_text("#drc-facts"), page.inner_text("#log-table")[:3000], proc.output()[-5000:])
+            raise
+        wait_until(
+            lambda: int(page.get_attribute("#drc-facts", "data-heartbeats") or 0) >= 10, 10, what="heartbeats"
+        )
+        assert int(page.get_attribute("#hb-chart", "data-points") or 0) >= 10
+        _shoot(page.locator("#drc"), shots / "drc-heartbeats.png")
+
+        # the emergency stop: every device told, the DRC session holds for it, the log says so
+        page.click("#estop")
+        page.wait_for_selector("#toast div >> text=EMERGENCY STOP sent to", timeout=5000)
+        page.wait_for_selector('#drc-facts[data-failsafe="emergency_stop"]', timeout=10000)
+        page.wait_for_selector('#log-table tr[data-method="emergency_stop"]', timeout=10000)
+        stops = [r for r in _audit(proc) if r["event"] == "console_emergency_stop" and r["result"] == "ok"]
+        assert stops and set(stops[-1]["stopped"]) == {"RSDK-SIM-0001", "OSDK-SIM-0001", "RM-SIM-0001"}
+        cloud.wait_for("drc/up", lambda b: b.get("method") == "heart_beat", timeout=5)
+
+        done = [r for r in _audit(proc) if r["event"] == "console_action" and r["result"] == 0]
+        assert [r["method"] for r in done] == [m for m, _ in sends] + ["drc_mode_enter"]
+        assert all(r["who"].startswith("session:") for r in done)
+        assert all("p" != r.get("data", {}).get("mqtt_broker", {}).get("password") for r in done)
+
+        page.evaluate("() => window.scrollTo(0, 0)")
+        _shoot(page, shots / "console.png")
+        if os.environ.get("DJIGW_SCREENSHOTS"):
+            page.screenshot(path=str(shots / "console-full.png"), full_page=True)
+        assert not errors, errors
+    finally:
+        cloud.close()
+        page.close()
+
+
+def test_the_page_sends_no_secret_and_no_outside_request(chromium: Any, gateway: dict[str, Any]) -> None:
+    """Everything the page loads comes from the gateway itself (no CDN), and no response carries the token."""
+    page = chromium.new_page()
+    seen: list[str] = []
+    bodies: list[str] = []
+
+    def on_response(response: Any) -> None:
+        seen.append(response.url)
+        if re.search(r"\.(js|css|html)$|/api/(catalog|session)$|/$", response.url):
+            bodies.append(response.text())
+
+    page.on("response", on_response)
+    try:
+        page.goto(gateway["url"] + "/")
+        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=10000)
+        assert seen and all(u.startswith(gateway["url"]) for u in seen), seen
+        assert any(u.endswith("/static/js/app.js") for u in seen)
+        assert bodies and not any(TOKEN in b for b in bodies)
+    finally:
+        page.close()
