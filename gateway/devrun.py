@@ -3,14 +3,18 @@
 Uses the broker given by ``BROKER`` (``mqtt://host:port``) when set; otherwise the one already
 listening on 127.0.0.1:``PORT`` (default 1883, the port ``dji-gateway send``/``monitor`` use by
 default), or else starts a private mosquitto there (``PORT=0``: any free port) and stops it on exit.
-Prints where to publish and the console commands that drive the simulated devices.
+Prints where to publish and the console commands that drive the simulated devices. The web console's
+token (unless ``DJIGW_CONSOLE__TOKEN`` or ``DJIGW_CONSOLE__TOKEN_FILE`` names one) is made fresh for the
+run and written to ``.console-token`` (mode 0600), never printed: sign in with what that file holds.
 """
 
 from __future__ import annotations
 
 import os
+import secrets
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from gateway.local_broker import LocalBroker, free_port, port_open
 from gateway.run_cli import (
@@ -22,6 +26,21 @@ from gateway.run_cli import (
 )
 
 DEFAULT_PORT = 1883
+TOKEN_FILE = Path(".console-token")
+
+
+def console_token() -> str:
+    """Where the console token comes from: the environment's, or a fresh one in ``.console-token``."""
+    if os.environ.get("DJIGW_CONSOLE__TOKEN"):
+        return "the token in $DJIGW_CONSOLE__TOKEN"
+    if os.environ.get("DJIGW_CONSOLE__TOKEN_FILE"):
+        return f"the token in {os.environ['DJIGW_CONSOLE__TOKEN_FILE']}"
+    TOKEN_FILE.unlink(missing_ok=True)
+    fd = os.open(TOKEN_FILE, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w") as out:
+        out.write(secrets.token_urlsafe(24) + "\n")
+    os.environ["DJIGW_CONSOLE__TOKEN_FILE"] = str(TOKEN_FILE.resolve())
+    return f"the token in {TOKEN_FILE} (new for this run)"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -38,6 +57,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             broker = LocalBroker(port).start()
             url = broker.url
             print(f"started mosquitto on 127.0.0.1:{broker.port} (stopped when the gateway exits)")
+    token = console_token()
     host_port = url.split("://", 1)[1]
     host, _, port_text = host_port.partition(":")
     console_broker = "" if url == f"mqtt://127.0.0.1:{DEFAULT_PORT}" else f" --broker {url}"
@@ -57,6 +77,7 @@ drive it:      dji-gateway send payload_authority_grab payload_index={SIM_GIMBAL
 --gateway-sn {SIM_GATEWAY_SN}{console_broker}
 raw MQTT:      mosquitto_sub -h {host} -p {port_text or 1883} -t 'thing/product/#' -t 'sys/product/#' -v
 status:        dji-gateway status   (metrics on http://127.0.0.1:9108/metrics unless --metrics-port)
+web console:   http://127.0.0.1:9108/   (actions: sign in with {token})
 Ctrl-C stops the gateway (motion first, then the offline topology).
 """,
         flush=True,

@@ -100,8 +100,15 @@ def gateway() -> Iterator[dict[str, Any]]:
     broker = LocalBroker(0).start()
     env = {k: v for k, v in os.environ.items() if not k.startswith("DJIGW_")}
     env.update(DJIGW_CONSOLE__TOKEN=TOKEN, PYTHONUNBUFFERED="1")
-    argv = [str(Path(sys.executable).parent / "dji-gateway"), "run", "--simulate", "--broker", broker.url,
-            "--metrics-port", "0"]  # fmt: skip
+    argv = [
+        str(Path(sys.executable).parent / "dji-gateway"),
+        "run",
+        "--simulate",
+        "--broker",
+        broker.url,
+        "--metrics-port",
+        "0",
+    ]
     proc = Proc("gateway", argv, env)
     try:
         port = int(proc.wait_for_line(r"web console on http://127\.0\.0\.1:(\d+)/", 20).group(1))
@@ -266,8 +273,11 @@ def test_the_readme_walkthrough_in_the_page(chromium: Any, gateway: dict[str, An
             fields = parse_assignments([w for w in words[3:] if "=" in w and not w.startswith("--")])
             sends.append((method, fields))
         assert [m for m, _ in sends] == [
-            "payload_authority_grab", "camera_aim", "flight_authority_grab", "takeoff_to_point",
-        ]  # fmt: skip
+            "payload_authority_grab",
+            "camera_aim",
+            "flight_authority_grab",
+            "takeoff_to_point",
+        ]
         gimbal = '.instrument.gimbal[data-sn="RSDK-SIM-0001"]'
         for method, fields in sends:
             result = _send_from_page(page, _device_for(catalog, method, fields), method, _nest(fields))
@@ -309,7 +319,12 @@ def test_the_readme_walkthrough_in_the_page(chromium: Any, gateway: dict[str, An
         try:
             page.wait_for_selector('#drc-facts[data-state="2"]', timeout=10000)
         except Exception:
-            print("DEBUG", page.inner_text("#drc-facts"), page.inner_text("#log-table")[:3000], proc.output()[-5000:])
+            print(
+                "DEBUG",
+                page.inner_text("#drc-facts"),
+                page.inner_text("#log-table")[:3000],
+                proc.output()[-5000:],
+            )
             raise
         wait_until(
             lambda: int(page.get_attribute("#drc-facts", "data-heartbeats") or 0) >= 10, 10, what="heartbeats"
@@ -329,7 +344,7 @@ def test_the_readme_walkthrough_in_the_page(chromium: Any, gateway: dict[str, An
         done = [r for r in _audit(proc) if r["event"] == "console_action" and r["result"] == 0]
         assert [r["method"] for r in done] == [m for m, _ in sends] + ["drc_mode_enter"]
         assert all(r["who"].startswith("session:") for r in done)
-        assert all("p" != r.get("data", {}).get("mqtt_broker", {}).get("password") for r in done)
+        assert all(r.get("data", {}).get("mqtt_broker", {}).get("password") != "p" for r in done)
 
         page.evaluate("() => window.scrollTo(0, 0)")
         _shoot(page, shots / "console.png")
