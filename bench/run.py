@@ -118,6 +118,7 @@ SUITES: list[tuple[str, Suite]] = [
     ("resume", _lazy("bench.resume")),
     ("partitions", _lazy("bench.partitions")),
     ("failover", _lazy("bench.failover")),
+    ("console", _lazy("bench.console")),
     ("soak", _lazy("bench.soak")),
 ]
 #: suites timed inside this one process, pinned to one CPU. The others run brokers, gateways and

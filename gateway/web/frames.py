@@ -11,8 +11,10 @@ the CAN frames (``dji-gateway decode rsdk`` reads it back) or one frame per line
 
 Memory is bounded: a tap keeps its last ``keep`` records, an inspector its last ``keep`` frames, a
 half-received frame at most one frame. Records a slow reader missed are counted as a gap and the
-streams restart. Decoding runs where :meth:`LinkInspector.poll` is called (the web server's thread),
-never in a link's thread nor on the gateway's loop.
+streams restart. Decoding runs where :meth:`LinkInspector.poll` is called (the web server's thread, in
+small slices), never in a link's thread nor on the gateway's loop; a live view decodes at most the
+newest records of a flood (``catch_up``), so a busy link cannot make the console hold the interpreter
+lock for long while the gateway answers the cloud.
 
 Must not know HTTP, the page, the adapters' internals, or any frame layout (the families' rules and
 describe modules know them).
@@ -124,36 +126,56 @@ class LinkInspector:
         self.tap = FrameTap(keep)
         self.frames: deque[dict[str, Any]] = deque(maxlen=keep)
         self.gaps = 0  # times records were lost before they were read (the streams restarted)
+        self.skipped = 0  # records a live view skipped to catch up with a flood (the downloads keep them)
+        self._restarted: set[str] = set()  # directions whose stream restarted after a gap
         self._spec = FAMILIES[family]
         self._describe = importlib.import_module(f"adapters.{family}.describe")
         self._streams: dict[tuple[str, int | None], StreamDecoder[bytes]] = {}
         self._sent: dict[Any, str] = {}  # seq of a command sent -> its name (replies are described by it)
-        self._last = -1  # the last tap record read
+        self._last = -1  # the last tap record read (the tap numbers them from 0)
         self._numbers = itertools.count()
         self._lock = threading.Lock()
 
     # -- decoding -----------------------------------------------------------------------------------
-    def poll(self) -> list[dict[str, Any]]:
-        """Decode the records that arrived since the last call; returns the new frames (also kept)."""
+    def poll(self, limit: int | None = None, catch_up: int | None = None) -> list[dict[str, Any]]:
+        """Decode the records that arrived since the last call (at most ``limit`` of them; :attr:`behind`
+        says whether more wait); returns the new frames, also kept. ``catch_up``: when more than that many
+        records wait, the older ones are skipped (counted in :attr:`skipped`): a live view shows the
+        newest frames, a flood must not make it decode the past."""
         with self._lock:
             new: list[dict[str, Any]] = []
-            for n, t, direction, can_id, data in self.tap.snapshot():
-                if n <= self._last:
-                    continue
-                if self._last >= 0 and n != self._last + 1:
+            pending = [r for r in self.tap.snapshot() if r[0] > self._last]
+            if catch_up is not None and len(pending) > catch_up:
+                self.skipped += len(pending) - catch_up
+                pending = pending[-catch_up:]
+            for n, t, direction, can_id, data in pending[:limit]:
+                if n != self._last + 1:  # records were dropped (by the tap, or skipped to catch up)
                     self.gaps += 1
                     self._streams.clear()  # a frame may have lost its middle: start again on a SOF
+                    self._restarted = {"rx", "tx"}
                 self._last = n
                 stream = self._streams.get((direction, can_id))
                 if stream is None:
                     rules = _RawRules(self._spec.rules(self.options))
                     stream = self._streams[(direction, can_id)] = StreamDecoder(rules)
                 for item in stream.feed(data):
+                    if direction in self._restarted and isinstance(item, BadFrame):
+                        continue  # the tail of a frame whose start was skipped: not the link's fault
+                    self._restarted.discard(direction)
                     record = self._describe_one(item, direction)
                     record.update(n=next(self._numbers), t=round(t, 6), dir=direction, can_id=can_id)
                     self.frames.append(record)
                     new.append(record)
             return new
+
+    @property
+    def behind(self) -> bool:
+        """Records wait that :meth:`poll` has not read yet."""
+        records = self.tap.records
+        try:
+            return bool(records) and records[-1][0] > self._last
+        except IndexError:
+            return False
 
     def _describe_one(self, item: bytes | BadFrame, direction: str) -> dict[str, Any]:
         if isinstance(item, BadFrame):

@@ -53,6 +53,11 @@ STATIC = Path(str(resources.files("gateway.web") / "static"))
 CLIENT_QUEUE = 200
 #: the longest an action may take on the gateway's loop (the dispatcher answers within 3 s)
 ACTION_DEADLINE = 5.0
+#: frame inspector: link records decoded between two yields of the web loop (each yield lets the
+#: gateway's threads have the interpreter lock), and the most a push tick decodes per link (a flood's
+#: older records are skipped in the live view; the downloads keep them)
+DECODE_SLICE = 8
+DECODE_PER_TICK = 120
 _JSON = "application/json"
 _HEADERS = {
     "X-Content-Type-Options": "nosniff",
@@ -530,7 +535,7 @@ class WebServer:
                     page.frames_sn = sn if isinstance(sn, str) and sn in self.state.inspectors else None
                     if page.frames_sn is not None:
                         inspector = self.state.inspectors[page.frames_sn]
-                        inspector.poll()
+                        await self._decode(inspector)
                         page.offer(
                             _dumps(
                                 {
@@ -565,6 +570,17 @@ class WebServer:
                 log.exception("console push failed")
             await asyncio.sleep(max(0.0, period - (loop.time() - started)))
 
+    @staticmethod
+    async def _decode(inspector: Any) -> list[dict[str, Any]]:
+        """The inspector's new frames, decoded a slice at a time (the loop yields between slices)."""
+        new = inspector.poll(DECODE_SLICE, catch_up=DECODE_PER_TICK)
+        for _ in range(DECODE_PER_TICK // DECODE_SLICE):  # what came meanwhile waits for the next tick
+            if not inspector.behind:
+                break
+            await asyncio.sleep(0)
+            new += inspector.poll(DECODE_SLICE)
+        return new
+
     async def _tick(self) -> None:
         try:
             snap = await self._on_gateway(self.state.gather)
@@ -574,6 +590,7 @@ class WebServer:
         pages = list(self._pages)
         for page in pages:
             page.offer(state, state=True)
+        await asyncio.sleep(0)  # the pages' senders run; the gateway's threads get the interpreter lock
         entries = self.state.journal.since(self._journal_n)
         if entries:
             self._journal_n = entries[-1]["n"]
@@ -582,7 +599,7 @@ class WebServer:
                 page.offer(message)
         for sn in {p.frames_sn for p in pages if p.frames_sn is not None}:
             inspector = self.state.inspectors[sn]
-            new = inspector.poll()
+            new = await self._decode(inspector)
             if new:
                 message = _dumps({"type": "frames", "sn": sn, "kind": inspector.kind, "records": new})
                 for page in pages:

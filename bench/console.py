@@ -1,0 +1,315 @@
+"""The web console's cost to the gateway: CPU with pages open, and service round trips meanwhile.
+
+The gateway is ``dji-gateway run --simulate`` as its own process (three simulated devices: the R SDK
+gimbal on a virtual CAN bus, the Onboard SDK aircraft and the RoboMaster robot on loopback serial
+ports, all inside that process) against a private mosquitto. Its CPU time is read from
+``/proc/<pid>/stat`` (user + system) over a window:
+
+* **no page** (the baseline, measured before and after the pages, averaged);
+* **1 page** and **20 pages**: WebSocket clients in a process of their own (as a browser is) that do
+  what an open console page does to the gateway: fetch ``/api/catalog`` and ``/api/tracks`` once, then
+  read the 10 Hz state push and the frame inspector of the gimbal's CAN link (the busiest link).
+
+Targets (issue #21): one page at 10 Hz with three devices raises the gateway's CPU by at most 5 % of one
+core; 20 pages by at most 15 %. While a page is open, ``x_rsdk_version_get`` round trips (cloud →
+mosquitto → gateway → CAN → simulated gimbal → back) must stay within the ``e2e`` suite's targets over a
+bare broker echo (p50 ≤ +1 ms, p99 ≤ +3 ms): measured in the e2e suite's own set-up (gateway and gimbal
+simulator in this process), with the console on and one page (another process) reading it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+
+import aiohttp
+
+from adapters.rsdk.sim import GimbalCanSim
+from bench.e2e import _echo, _pct, _Timer
+from bench.run import ROOT, Config, Row
+from gateway.local_broker import LocalBroker
+from gateway.settings import load_settings
+from tests.support import GatewayThread, Proc
+
+GW = "DJIGW-SIM-0001"
+GIMBAL = "RSDK-SIM-0001"
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+def _cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICK  # utime + stime
+
+
+def _cpu_percent(pid: int, seconds: float) -> float:
+    c0, t0 = _cpu_seconds(pid), time.monotonic()
+    time.sleep(seconds)
+    return 100.0 * (_cpu_seconds(pid) - c0) / (time.monotonic() - t0)
+
+
+class Pages:
+    """``n`` console pages (WebSocket clients) on their own loop in a thread, until :meth:`close`."""
+
+    def __init__(self, url: str, n: int) -> None:
+        self.url, self.n = url, n
+        self.states = 0
+        self.frames = 0
+        self._stop: asyncio.Event | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._ready = threading.Event()
+        self._thread = threading.Thread(target=lambda: asyncio.run(self._main()), daemon=True)
+        self._thread.start()
+        if not self._ready.wait(30):
+            raise RuntimeError("the pages did not connect")
+
+    async def _page(self, session: aiohttp.ClientSession, connected: list[int]) -> None:
+        for path in ("/api/catalog", "/api/tracks"):
+            async with session.get(self.url + path) as resp:
+                await resp.read()
+        async with session.ws_connect(self.url + "/api/ws", headers={"Origin": self.url}) as ws:
+            await ws.send_str(json.dumps({"type": "frames", "sn": GIMBAL}))
+            connected.append(1)
+            if len(connected) == self.n:
+                self._ready.set()
+            assert self._stop is not None
+            while not self._stop.is_set():
+                try:
+                    msg = await ws.receive(timeout=0.5)
+                except TimeoutError:
+                    continue
+                if msg.type != aiohttp.WSMsgType.TEXT:
+                    break
+                kind = json.loads(msg.data)["type"]  # a page parses every message
+                if kind == "state":
+                    self.states += 1
+                elif kind == "frames":
+                    self.frames += 1
+
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        connected: list[int] = []
+        async with aiohttp.ClientSession() as session:
+            await asyncio.gather(*(self._page(session, connected) for _ in range(self.n)))
+
+    def close(self) -> None:
+        if self._loop is not None and self._stop is not None:
+            self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(10)
+
+
+class PageProcess:
+    """:class:`Pages` in a process of their own, as a browser is: the gateway's process does only its part."""
+
+    def __init__(self, url: str, n: int) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "bench.console", url, str(n)],
+            cwd=ROOT,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        assert self.proc.stdout is not None and self.proc.stdin is not None
+        if self.proc.stdout.readline().strip() != "ready":
+            raise RuntimeError("the pages did not connect")
+
+    @property
+    def states(self) -> int:
+        assert self.proc.stdout is not None and self.proc.stdin is not None
+        self.proc.stdin.write("count\n")
+        self.proc.stdin.flush()
+        return int(self.proc.stdout.readline().split()[0])
+
+    def close(self) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.close()
+        self.proc.wait(15)
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+
+
+def _round_trips(broker: LocalBroker, n: int) -> tuple[list[float], float]:
+    """The e2e suite's setup (the gateway and the simulated gimbal on a virtual CAN bus, in this process)
+    with its console on and one page open: ``x_rsdk_version_get`` round trips, and the page's push rate."""
+    channel = f"bench-console-{uuid.uuid4().hex[:6]}"
+    sim = GimbalCanSim(interface="virtual", channel=channel).start()
+    settings = load_settings(
+        None,
+        gateway_sn=GW,
+        broker={"url": broker.url},
+        dispatcher={"require_authority": False},
+        metrics={"port": 0},
+        devices=[
+            {
+                "type": "rsdk",
+                "sn": GIMBAL,
+                "payload_index": "1001-0-0",
+                "interface": "virtual",
+                "channel": channel,
+            }
+        ],
+    )
+    gw = GatewayThread(settings).start()
+    samples: list[float] = []
+    try:
+        deadline = time.monotonic() + 10
+        while not gw.app.devices.by_sn(GIMBAL).online and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert gw.app.observability is not None
+        pages = PageProcess(f"http://127.0.0.1:{gw.app.observability.port}", 1)
+        timer = _Timer(broker.port, f"thing/product/{GW}/services_reply")
+        started, states = time.monotonic(), pages.states
+        try:
+            for i in range(n + 20):
+                tid = f"console-{i}-{uuid.uuid4().hex[:6]}"
+                msg = {
+                    "tid": tid,
+                    "bid": "bench",
+                    "timestamp": 0,
+                    "method": "x_rsdk_version_get",
+                    "data": {"payload_index": "1001-0-0"},
+                }
+                ms = timer.round_trip(f"thing/product/{GW}/services", json.dumps(msg).encode(), tid)
+                if i >= 20:
+                    samples.append(ms)
+        finally:
+            rate = (pages.states - states) / (time.monotonic() - started)
+            timer.close()
+            pages.close()
+    finally:
+        gw.stop()
+        sim.stop()
+    return samples, rate
+
+
+def run(cfg: Config) -> list[Row]:
+    window = 4.0 if cfg.quick else 15.0
+    n_trips = 200 if cfg.quick else 1000
+    rows: list[Row] = []
+    with LocalBroker() as broker:
+        echo = _echo(broker.port)
+        timer = _Timer(broker.port, "bench/echo/reply")
+        bare = []
+        for i in range(n_trips + 20):
+            tid = f"echo-{i}"
+            ms = timer.round_trip("bench/echo/request", json.dumps({"tid": tid}).encode(), tid)
+            if i >= 20:
+                bare.append(ms)
+        timer.close()
+        echo.disconnect()
+        echo.loop_stop()
+
+        env = {k: v for k, v in os.environ.items() if not k.startswith("DJIGW_")}
+        env["PYTHONUNBUFFERED"] = "1"
+        argv = [
+            str(Path(sys.executable).parent / "dji-gateway"),
+            "run",
+            "--simulate",
+            "--broker",
+            broker.url,
+            "--metrics-port",
+            "0",
+        ]
+        gateway = Proc("gateway", argv, env)
+        try:
+            port = gateway.wait_for_line(r"web console on http://127\.0\.0\.1:(\d+)/", 20).group(1)
+            url = f"http://127.0.0.1:{port}"
+            gateway.wait_for_line(r"running with 3 device\(s\)", 20)
+            time.sleep(3.0)  # every device online and pushing
+            print(f".. console: gateway pid {gateway.proc.pid} at {url}", file=sys.stderr)
+            idle_before = _cpu_percent(gateway.proc.pid, window)
+            pages = PageProcess(url, 1)
+            states = pages.states
+            one = _cpu_percent(gateway.proc.pid, window)
+            one_states = (pages.states - states) / window
+            pages.close()
+            pages = PageProcess(url, 20)
+            states = pages.states
+            twenty = _cpu_percent(gateway.proc.pid, window)
+            per_page = (pages.states - states) / 20 / window
+            pages.close()
+            idle_after = _cpu_percent(gateway.proc.pid, window)
+        finally:
+            code = gateway.stop()
+        if code != 0 or "Traceback" in gateway.output():
+            raise AssertionError(f"the gateway failed: {gateway.output()[-2000:]}")
+        trips, trip_states = _round_trips(broker, n_trips)
+    idle = (idle_before + idle_after) / 2
+    if one_states < 5 or per_page < 5:
+        raise AssertionError(f"pages got too few pushes: {one_states:.1f}/s (1 page), {per_page:.1f}/s (20)")
+    where = "gateway process (3 simulated devices inside it)"
+    rows.append(
+        Row(
+            group="console",
+            case="gateway CPU, no page (%)",
+            count=2,
+            rate=idle,
+            unit="% core",
+            note=f"{where}; before {idle_before:.1f} %, after {idle_after:.1f} %",
+        )
+    )
+    rows.append(
+        Row(
+            group="console",
+            case="gateway CPU, 1 page at 10 Hz (%)",
+            count=1,
+            rate=one,
+            base_rate=idle,
+            max_over_base=5.0,
+            unit="% core",
+            note=f"state push + gimbal frame inspector; page got {one_states:.1f} states/s",
+        )
+    )
+    rows.append(
+        Row(
+            group="console",
+            case="gateway CPU, 20 pages at 10 Hz (%)",
+            count=20,
+            rate=twenty,
+            base_rate=idle,
+            max_over_base=15.0,
+            unit="% core",
+            note=f"each page got {per_page:.1f} states/s",
+        )
+    )
+    for label, q, target in (("p50", 0.50, 1.0), ("p99", 0.99, 3.0)):
+        rows.append(
+            Row(
+                group="console",
+                case=f"x_rsdk_version_get round trip {label}, 1 page open",
+                count=n_trips,
+                rate=_pct(trips, q),
+                base_rate=_pct(bare, q),
+                base_count=n_trips,
+                max_over_base=target,
+                unit="ms",
+                note=(
+                    f"e2e set-up with the console on, a page (another process) reading {trip_states:.1f} "
+                    "states/s and the gimbal's frames; baseline: bare broker echo (the e2e targets)"
+                )
+                if label == "p50"
+                else "",
+            )
+        )
+    return rows
+
+
+def _serve_pages(url: str, n: int) -> None:
+    """The child of :class:`PageProcess`: open the pages, answer "count" on stdin, stop at its end."""
+    pages = Pages(url, n)
+    print("ready", flush=True)
+    for line in sys.stdin:
+        if line.strip() == "count":
+            print(pages.states, pages.frames, flush=True)
+    pages.close()
+
+
+if __name__ == "__main__":
+    _serve_pages(sys.argv[1], int(sys.argv[2]))
