@@ -58,6 +58,7 @@ ACTION_DEADLINE = 5.0
 #: older records are skipped in the live view; the downloads keep them)
 DECODE_SLICE = 8
 DECODE_PER_TICK = 120
+DECODE_PAUSE = 0.001
 _JSON = "application/json"
 _HEADERS = {
     "X-Content-Type-Options": "nosniff",
@@ -577,7 +578,9 @@ class WebServer:
         for _ in range(DECODE_PER_TICK // DECODE_SLICE):  # what came meanwhile waits for the next tick
             if not inspector.behind:
                 break
-            await asyncio.sleep(0)
+            # a real pause, not sleep(0): releasing the interpreter lock for an instant lets this thread
+            # take it straight back; a millisecond lets the gateway's waiting threads have it
+            await asyncio.sleep(DECODE_PAUSE)
             new += inspector.poll(DECODE_SLICE)
         return new
 
