@@ -207,7 +207,7 @@ def _round_trips(broker: LocalBroker, n: int, rounds: int) -> dict[str, tuple[li
 
 
 def run(cfg: Config) -> list[Row]:
-    window = 4.0 if cfg.quick else 15.0
+    window = 2.0 if cfg.quick else 15.0
     n_trips = 200 if cfg.quick else 1000
     rows: list[Row] = []
     with LocalBroker() as broker:
@@ -239,7 +239,7 @@ def run(cfg: Config) -> list[Row]:
             port = gateway.wait_for_line(r"web console on http://127\.0\.0\.1:(\d+)/", 20).group(1)
             url = f"http://127.0.0.1:{port}"
             gateway.wait_for_line(r"running with 3 device\(s\)", 20)
-            time.sleep(3.0)  # every device online and pushing
+            time.sleep(1.0 if cfg.quick else 3.0)  # every device online and pushing
             print(f".. console: gateway pid {gateway.proc.pid} at {url}", file=sys.stderr)
             idle_before = _cpu_percent(gateway.proc.pid, window)
             pages = PageProcess(url, 1)
@@ -257,7 +257,7 @@ def run(cfg: Config) -> list[Row]:
             code = gateway.stop()
         if code != 0 or "Traceback" in gateway.output():
             raise AssertionError(f"the gateway failed: {gateway.output()[-2000:]}")
-        trips = _round_trips(broker, n_trips, 2 if cfg.quick else 5)
+        trips = _round_trips(broker, n_trips, 1 if cfg.quick else 5)
     idle = (idle_before + idle_after) / 2
     if one_states < 5 or per_page < 5:
         raise AssertionError(f"pages got too few pushes: {one_states:.1f}/s (1 page), {per_page:.1f}/s (20)")

@@ -356,6 +356,76 @@ def test_the_readme_walkthrough_in_the_page(chromium: Any, gateway: dict[str, An
         page.close()
 
 
+def _png(width: int, height: int, rgb: tuple[int, int, int]) -> bytes:
+    """A one-colour PNG (a map tile for the tile server below)."""
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    rows = b"".join(b"\x00" + bytes(rgb) * width for _ in range(height))
+    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", header)
+        + chunk(b"IDAT", zlib.compress(rows))
+        + chunk(b"IEND", b"")
+    )
+
+
+def test_map_tiles_come_from_the_configured_url(chromium: Any) -> None:
+    """With ``console.tile_url`` the map draws tiles from that server (loopback here) under the grid."""
+    import http.server
+    import threading
+
+    asked: list[str] = []
+    tile = _png(256, 256, (40, 90, 60))
+
+    class Tiles(http.server.BaseHTTPRequestHandler):
+        def do_GET(self) -> None:
+            asked.append(self.path)
+            self.send_response(200)
+            self.send_header("Content-Type", "image/png")
+            self.send_header("Content-Length", str(len(tile)))
+            self.end_headers()
+            self.wfile.write(tile)
+
+        def log_message(self, *args: Any) -> None:
+            pass
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Tiles)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    broker = LocalBroker(0).start()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("DJIGW_")}
+    env.update(DJIGW_CONSOLE__TILE_URL=f"http://127.0.0.1:{server.server_address[1]}/{{z}}/{{x}}/{{y}}.png")
+    argv = [
+        str(Path(sys.executable).parent / "dji-gateway"),
+        "run",
+        "--simulate",
+        "--broker",
+        broker.url,
+        "--metrics-port",
+        "0",
+    ]
+    proc = Proc("gateway", argv, {**env, "PYTHONUNBUFFERED": "1"})
+    page = chromium.new_page()
+    try:
+        port = int(proc.wait_for_line(r"web console on http://127\.0\.0\.1:(\d+)/", 20).group(1))
+        page.goto(f"http://127.0.0.1:{port}/")
+        page.wait_for_selector("#map-svg g.tiles image", state="attached", timeout=10000)
+        wait_until(
+            lambda: any(re.fullmatch(r"/\d+/\d+/\d+\.png", p) for p in asked), 10, what="tiles fetched"
+        )
+        href = page.get_attribute("#map-svg g.tiles image", "href") or ""
+        assert href.startswith(f"http://127.0.0.1:{server.server_address[1]}/")
+        assert "tiles" in page.inner_text("#map-note")
+    finally:
+        page.close()
+        assert proc.stop(timeout=20) == 0
+        broker.stop()
+        server.shutdown()
+        server.server_close()
+
+
 def test_the_page_sends_no_secret_and_no_outside_request(chromium: Any, gateway: dict[str, Any]) -> None:
     """Everything the page loads comes from the gateway itself (no CDN), and no response carries the token."""
     page = chromium.new_page()
