@@ -80,6 +80,24 @@ def _echo(port: int) -> paho.Client:
     return echo
 
 
+def bare_echo(port: int, n: int, warmup: int = 50) -> list[float]:
+    """``n`` round trips (ms) through the broker and an echo client: the floor for a gateway's."""
+    echo = _echo(port)
+    timer = _Timer(port, "bench/echo/reply")
+    samples = []
+    try:
+        for i in range(n + warmup):
+            tid = f"echo-{i}"
+            ms = timer.round_trip("bench/echo/request", json.dumps({"tid": tid}).encode(), tid)
+            if i >= warmup:
+                samples.append(ms)
+    finally:
+        timer.close()
+        echo.disconnect()
+        echo.loop_stop()
+    return samples
+
+
 def _pct(samples: list[float], q: float) -> float:
     ordered = sorted(samples)
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
@@ -89,18 +107,7 @@ def run(cfg: Config) -> list[Row]:
     n = 200 if cfg.quick else 2000
     rows: list[Row] = []
     with LocalBroker() as broker:
-        # -- bare echo
-        echo = _echo(broker.port)
-        timer = _Timer(broker.port, "bench/echo/reply")
-        bare = []
-        for i in range(n + 50):
-            tid = f"echo-{i}"
-            ms = timer.round_trip("bench/echo/request", json.dumps({"tid": tid}).encode(), tid)
-            if i >= 50:
-                bare.append(ms)
-        timer.close()
-        echo.disconnect()
-        echo.loop_stop()
+        bare = bare_echo(broker.port, n)
 
         # -- through the gateway to the simulated gimbal and back
         channel = f"bench-{uuid.uuid4().hex[:6]}"

@@ -479,3 +479,30 @@ class Proc:
         if self.proc.stdout:
             self.proc.stdout.close()
         return int(self.proc.returncode)
+
+
+def simulated_gateway(broker_url: str, **env: str) -> tuple[Proc, str]:
+    """``dji-gateway run --simulate`` as its own process (``DJIGW_*`` from ``env`` only), its HTTP endpoint
+    on any free port: the process, once its three devices run, and the endpoint's URL."""
+    import os
+    import sys
+    from pathlib import Path
+
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("DJIGW_")}
+    argv = [
+        str(Path(sys.executable).parent / "dji-gateway"),
+        "run",
+        "--simulate",
+        "--broker",
+        broker_url,
+        "--metrics-port",
+        "0",
+    ]
+    proc = Proc("gateway", argv, {**clean, **env, "PYTHONUNBUFFERED": "1"})
+    try:
+        port = proc.wait_for_line(r"metrics on http://127\.0\.0\.1:(\d+)/metrics", 20).group(1)
+        proc.wait_for_line(r"running with 3 device\(s\)", 20)
+    except BaseException:
+        proc.stop()
+        raise
+    return proc, f"http://127.0.0.1:{port}"

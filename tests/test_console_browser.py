@@ -21,7 +21,6 @@ import os
 import re
 import shlex
 import struct
-import sys
 import tempfile
 import time
 import urllib.request
@@ -34,7 +33,7 @@ import pytest
 
 from gateway.codec_cli import parse_assignments
 from gateway.local_broker import LocalBroker
-from tests.support import CloudClient, Proc, wait_until
+from tests.support import CloudClient, Proc, simulated_gateway, wait_until
 from tests.test_readme_walkthrough import walkthrough
 
 pytestmark = [pytest.mark.browser, pytest.mark.broker, pytest.mark.timeout(300)]
@@ -98,22 +97,9 @@ def chromium() -> Iterator[Any]:
 def gateway() -> Iterator[dict[str, Any]]:
     """``dji-gateway run --simulate`` with the console token in its environment, on any free port."""
     broker = LocalBroker(0).start()
-    env = {k: v for k, v in os.environ.items() if not k.startswith("DJIGW_")}
-    env.update(DJIGW_CONSOLE__TOKEN=TOKEN, PYTHONUNBUFFERED="1")
-    argv = [
-        str(Path(sys.executable).parent / "dji-gateway"),
-        "run",
-        "--simulate",
-        "--broker",
-        broker.url,
-        "--metrics-port",
-        "0",
-    ]
-    proc = Proc("gateway", argv, env)
+    proc, url = simulated_gateway(broker.url, DJIGW_CONSOLE__TOKEN=TOKEN)
     try:
-        port = int(proc.wait_for_line(r"web console on http://127\.0\.0\.1:(\d+)/", 20).group(1))
-        proc.wait_for_line(r"running with 3 device\(s\)", 20)
-        yield {"url": f"http://127.0.0.1:{port}", "broker": broker, "proc": proc}
+        yield {"url": url, "broker": broker, "proc": proc}
     finally:
         code = proc.stop(timeout=20)
         broker.stop()
@@ -395,22 +381,11 @@ def test_map_tiles_come_from_the_configured_url(chromium: Any) -> None:
     server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Tiles)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     broker = LocalBroker(0).start()
-    env = {k: v for k, v in os.environ.items() if not k.startswith("DJIGW_")}
-    env.update(DJIGW_CONSOLE__TILE_URL=f"http://127.0.0.1:{server.server_address[1]}/{{z}}/{{x}}/{{y}}.png")
-    argv = [
-        str(Path(sys.executable).parent / "dji-gateway"),
-        "run",
-        "--simulate",
-        "--broker",
-        broker.url,
-        "--metrics-port",
-        "0",
-    ]
-    proc = Proc("gateway", argv, {**env, "PYTHONUNBUFFERED": "1"})
+    tiles = f"http://127.0.0.1:{server.server_address[1]}/{{z}}/{{x}}/{{y}}.png"
+    proc, url = simulated_gateway(broker.url, DJIGW_CONSOLE__TILE_URL=tiles)
     page = chromium.new_page()
     try:
-        port = int(proc.wait_for_line(r"web console on http://127\.0\.0\.1:(\d+)/", 20).group(1))
-        page.goto(f"http://127.0.0.1:{port}/")
+        page.goto(url + "/")
         page.wait_for_selector("#map-svg g.tiles image", state="attached", timeout=10000)
         wait_until(
             lambda: any(re.fullmatch(r"/\d+/\d+/\d+\.png", p) for p in asked), 10, what="tiles fetched"
