@@ -14,7 +14,8 @@ Targets (issue #21): one page at 10 Hz with three devices raises the gateway's C
 core; 20 pages by at most 15 %. While a page is open, ``x_rsdk_version_get`` round trips (cloud →
 mosquitto → gateway → CAN → simulated gimbal → back) must stay within the ``e2e`` suite's targets over a
 bare broker echo (p50 ≤ +1 ms, p99 ≤ +3 ms): measured in the e2e suite's own set-up (gateway and gimbal
-simulator in this process), with the console on and one page (another process) reading it.
+simulator in this process), interleaved: with no HTTP endpoint at all, with the console on and no page,
+with one page (another process) reading it, and with that page watching the gimbal's frames.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import threading
 import time
 import uuid
 from pathlib import Path
+from typing import Any
 
 import aiohttp
 
@@ -136,13 +138,17 @@ class PageProcess:
             self.proc.stdout.close()
 
 
-#: the round-trip variants: (label, pages open, whether the page watches the gimbal's frames)
-VARIANTS = (("no page", 0, False), ("1 page, no inspector", 1, False), ("1 page + frame inspector", 1, True))
+#: the round-trip variants: (label, console on, pages open, whether the page watches the gimbal's frames)
+VARIANTS = (
+    ("console off", False, 0, False),
+    ("console on, no page", True, 0, False),
+    ("1 page, no inspector", True, 1, False),
+    ("1 page + frame inspector", True, 1, True),
+)
 
 
-def _round_trips(broker: LocalBroker, n: int, rounds: int) -> dict[str, tuple[list[float], float]]:
-    """The e2e suite's set-up (the gateway and the simulated gimbal on a virtual CAN bus, in this process)
-    with its console on: ``x_rsdk_version_get`` round trips per variant, and the page's push rate."""
+def _gateway(broker: LocalBroker, sn: str, console: bool) -> tuple[GatewayThread, Any]:
+    """The e2e suite's gateway: one simulated gimbal on a virtual CAN bus, in this process."""
     channel = f"bench-console-{uuid.uuid4().hex[:6]}"
     sim = GimbalCanSim(interface="virtual", channel=channel).start()
     gimbal = {
@@ -154,27 +160,41 @@ def _round_trips(broker: LocalBroker, n: int, rounds: int) -> dict[str, tuple[li
     }
     settings = load_settings(
         None,
-        gateway_sn=GW,
-        broker={"url": broker.url},
+        gateway_sn=sn,
+        broker={"url": broker.url, "client_id": f"bench-{sn}"},
         dispatcher={"require_authority": False},
-        metrics={"port": 0},
+        metrics={"port": 0, "enabled": console},
         devices=[gimbal],
     )
     gw = GatewayThread(settings).start()
-    out: dict[str, tuple[list[float], float]] = {}
+    deadline = time.monotonic() + 10
+    while not gw.app.devices.by_sn(GIMBAL).online and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return gw, sim
+
+
+def _round_trips(broker: LocalBroker, n: int, rounds: int) -> dict[str, tuple[list[float], float]]:
+    """``x_rsdk_version_get`` round trips per variant, in interleaved rounds, and the page's push rate:
+    two of the e2e suite's gateways side by side, one without its HTTP endpoint, one with the console."""
+    gateways = {
+        False: _gateway(broker, "GW-CONSOLE-OFF", False),
+        True: _gateway(broker, "GW-CONSOLE-ON", True),
+    }
     try:
-        deadline = time.monotonic() + 10
-        while not gw.app.devices.by_sn(GIMBAL).online and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert gw.app.observability is not None
-        url = f"http://127.0.0.1:{gw.app.observability.port}"
-        timer = _Timer(broker.port, f"thing/product/{GW}/services_reply")
-        samples: dict[str, list[float]] = {label: [] for label, _, _ in VARIANTS}
-        rates: dict[str, list[float]] = {label: [] for label, _, _ in VARIANTS}
+        observability = gateways[True][0].app.observability
+        assert observability is not None and gateways[False][0].app.observability is None
+        url = f"http://127.0.0.1:{observability.port}"
+        timers = {
+            on: _Timer(broker.port, f"thing/product/{gw.settings.gateway_sn}/services_reply")
+            for on, (gw, _) in gateways.items()
+        }
+        samples: dict[str, list[float]] = {label: [] for label, *_ in VARIANTS}
+        rates: dict[str, list[float]] = {label: [] for label, *_ in VARIANTS}
         try:
             # interleaved rounds: a machine whose load changes (others' jobs) weighs on every variant alike
             for _ in range(rounds):
-                for label, count, frames in VARIANTS:
+                for label, on, count, frames in VARIANTS:
+                    sn = gateways[on][0].settings.gateway_sn
                     pages = PageProcess(url, count, frames) if count else None
                     states = pages.states if pages else 0
                     started = time.monotonic()
@@ -188,8 +208,8 @@ def _round_trips(broker: LocalBroker, n: int, rounds: int) -> dict[str, tuple[li
                                 "method": "x_rsdk_version_get",
                                 "data": {"payload_index": "1001-0-0"},
                             }
-                            ms = timer.round_trip(
-                                f"thing/product/{GW}/services", json.dumps(msg).encode(), tid
+                            ms = timers[on].round_trip(
+                                f"thing/product/{sn}/services", json.dumps(msg).encode(), tid
                             )
                             if i >= 10:
                                 samples[label].append(ms)
@@ -198,12 +218,13 @@ def _round_trips(broker: LocalBroker, n: int, rounds: int) -> dict[str, tuple[li
                             rates[label].append((pages.states - states) / (time.monotonic() - started))
                             pages.close()
         finally:
-            timer.close()
-        out = {label: (samples[label], sum(rates[label]) / max(1, len(rates[label]))) for label in samples}
+            for timer in timers.values():
+                timer.close()
+        return {label: (samples[label], sum(rates[label]) / max(1, len(rates[label]))) for label in samples}
     finally:
-        gw.stop()
-        sim.stop()
-    return out
+        for gw, sim in gateways.values():
+            gw.stop()
+            sim.stop()
 
 
 def run(cfg: Config) -> list[Row]:
@@ -262,9 +283,7 @@ def run(cfg: Config) -> list[Row]:
         for label, q, target in (("p50", 0.50, 1.0), ("p99", 0.99, 3.0)):
             note = ""
             if label == "p50":
-                note = f"e2e set-up, console on; {variant}" + (
-                    f" (another process, {rate:.1f} states/s)" if rate else ""
-                )
+                note = f"e2e set-up; {variant}" + (f" (another process, {rate:.1f} states/s)" if rate else "")
                 note += "; baseline: bare broker echo (the e2e targets)"
             rows.append(
                 Row(

@@ -1,8 +1,9 @@
 """The console's log of events, requests and replies: what the gateway said and was asked, bounded.
 
 Owns the :class:`Journal`, fed on the gateway's loop by the app's message observers (every message the
-northbound and the dispatcher publish, every message the dispatcher is handed) and by the console's own
-actions; telemetry (``osd``, ``state``) and live-control traffic (``drc/*``, answered on the network
+northbound and the dispatcher publish, every message the dispatcher is handed: one bounded ``deque``
+append there, parsed later by :meth:`Journal.digest` in the web server's thread) and by the console's
+own actions; telemetry (``osd``, ``state``) and live-control traffic (``drc/*``, answered on the network
 threads) are left out: they are the instruments' and the DRC panel's business, and they are frequent.
 An entry keeps the method, tid, result and the body cut to :data:`MAX_BODY` characters with every value
 under a key that names a secret (``password``, ``secret``, ``token``) replaced by ``***``. Readers on
@@ -41,6 +42,7 @@ _KEPT = (
     "property/set_reply",
 )
 _TRACKED = ("fly_to_point", "takeoff_to_point")
+_TELEMETRY = ("/osd", "/state")
 
 
 def redact(value: Any) -> Any:
@@ -66,18 +68,31 @@ def _kind(topic_name: str) -> str | None:
 class Journal:
     def __init__(self, keep: int = 300) -> None:
         self.entries: deque[dict[str, Any]] = deque(maxlen=keep)
+        self._raw: deque[tuple[str, str, bytes]] = deque(maxlen=4 * keep)  # fed, not yet parsed
         self._numbers = itertools.count(1)
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()
         self._requests: dict[str, tuple[str, dict[str, Any]]] = {}  # tid -> tracked request, until its reply
         #: the last accepted fly-to / take-off target (method, data) and its progress events
         self.mission: dict[str, Any] | None = None
 
-    # -- feeding (the gateway's loop) -------------------------------------------------------------------
+    # -- feeding (the gateway's loop: an append, nothing parsed there) ---------------------------------
     def published(self, topic_name: str, payload: bytes) -> None:
-        self._message("up", topic_name, payload)
+        if not topic_name.endswith(_TELEMETRY):
+            self._raw.append(("up", topic_name, payload))
 
     def received(self, topic_name: str, payload: bytes) -> None:
-        self._message("down", topic_name, payload)
+        if not topic_name.endswith(_TELEMETRY):
+            self._raw.append(("down", topic_name, payload))
+
+    def digest(self) -> None:
+        """Parse what was fed since the last call (the web server's thread, once per tick)."""
+        raw = self._raw
+        while raw:
+            try:
+                direction, topic_name, payload = raw.popleft()
+            except IndexError:
+                break
+            self._message(direction, topic_name, payload)
 
     def note(self, kind: str, method: str, **fields: Any) -> None:
         """An entry that is not an MQTT message (a console action and its outcome)."""
@@ -141,6 +156,7 @@ class Journal:
 
     # -- reading (any thread) ---------------------------------------------------------------------------
     def since(self, n: int) -> list[dict[str, Any]]:
-        """Entries numbered above ``n``, oldest first."""
+        """Entries numbered above ``n``, oldest first (what was fed is parsed first)."""
+        self.digest()
         with self._lock:
             return [e for e in self.entries if e["n"] > n]

@@ -563,7 +563,11 @@ class WebServer:
         while True:
             if not self._pages:
                 self._has_pages.clear()
-                await self._has_pages.wait()
+                # no page: the journal is still read now and then (its fly-to target must not be missed)
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._has_pages.wait(), 1.0)
+                self.state.journal.digest()
+                continue
             started = loop.time()
             try:
                 await self._tick()
@@ -585,6 +589,7 @@ class WebServer:
         return new
 
     async def _tick(self) -> None:
+        self.state.journal.digest()  # here, not on the gateway's loop; gather reads the fly-to target
         try:
             snap = await self._on_gateway(self.state.gather)
             state = _dumps({"type": "state", **snap})
