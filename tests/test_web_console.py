@@ -195,6 +195,11 @@ def test_moving_a_device_needs_a_confirmation_and_the_gateway_validates_again(
         port, "POST", "/api/action", {"method": "camera_aim", "data": {**aim, "x": 2}, "confirm": True}, auth
     )
     assert status == 200 and body["result"] == 325001
+    # a field the console does not read is refused, not ignored
+    status, body, _ = request(
+        port, "POST", "/api/action", {"method": "camera_aim", "data": aim, "sn": SN}, auth
+    )
+    assert status == 400 and "sn" in body["error"]
     # a method no device here offers
     status, body, _ = request(port, "POST", "/api/action", {"method": "takeoff_to_point", "data": {}}, auth)
     assert status == 400
@@ -207,7 +212,7 @@ def test_moving_a_device_needs_a_confirmation_and_the_gateway_validates_again(
         lambda: abs(gw.app.devices.by_sn(SN).osd_snapshot()["gimbal_yaw"] - 28.0) < 0.5, 5, what="yaw 28"
     )
     records = audit_records(caplog)
-    assert [r["status"] for r in records if r.get("result") == "refused"] == [428, 400]
+    assert [r["status"] for r in records if r.get("result") == "refused"] == [428, 400, 400]
     console = [r for r in records if r["event"] == "console_action" and r["method"] == "camera_aim"]
     assert [r["result"] for r in console if "status" not in r] == [325001, 0]
     # the dispatcher's own audit line for the same services names the console as their source

@@ -453,6 +453,9 @@ class WebServer:
             return refuse(denied.status, denied.reason)
         if not isinstance(body, dict) or not isinstance(body.get("method"), str):
             return refuse(400, "expected {method, data, confirm}")
+        unknown = sorted(set(body) - {"method", "data", "confirm"})
+        if unknown:  # nothing accepted is ignored: a field the console does not read is refused
+            return refuse(400, f"unknown field(s) {unknown}: expected method, data, confirm")
         data = body.get("data", {})
         offered = await self._on_gateway(lambda: actions.offered(self.app))
         if method not in offered:
