@@ -11,11 +11,13 @@ ports, all inside that process) against a private mosquitto. Its CPU time is rea
   read the 10 Hz state push and the frame inspector of the gimbal's CAN link (the busiest link).
 
 Targets (issue #21): one page at 10 Hz with three devices raises the gateway's CPU by at most 5 % of one
-core; 20 pages by at most 15 %. While a page is open, ``x_rsdk_version_get`` round trips (cloud →
-mosquitto → gateway → CAN → simulated gimbal → back) must stay within the ``e2e`` suite's targets over a
-bare broker echo (p50 ≤ +1 ms, p99 ≤ +3 ms): measured in the e2e suite's own set-up (gateway and gimbal
-simulator in this process), interleaved: with no HTTP endpoint at all, with the console on and no page,
-with one page (another process) reading it, and with that page watching the gimbal's frames.
+core; 20 pages by at most 15 %. Round trips: ``x_rsdk_version_get`` (cloud → mosquitto → gateway → CAN
+→ simulated gimbal → back) in the e2e suite's own set-up (gateway and gimbal simulator in this process),
+interleaved: with no HTTP endpoint at all (reported against the bare broker echo, as the e2e suite does),
+with the console on and no page, with one page (another process) reading it, and with that page watching
+the gimbal's frames — each held to the e2e margins (p50 ≤ +1 ms, p99 ≤ +3 ms) over the gateway without
+its HTTP endpoint measured in the same rounds, so the rows say what the console costs, not how loaded
+the machine is.
 """
 
 from __future__ import annotations
@@ -279,19 +281,39 @@ def run(cfg: Config) -> list[Row]:
                 note=f"state push + the gimbal's frame inspector; each page got {rate:.1f} states/s",
             )
         )
+    off = trips["console off"][0]
+    for label, q in (("p50", 0.50), ("p99", 0.99)):
+        rows.append(
+            Row(
+                group="console",
+                case=f"x_rsdk_version_get round trip {label}, console off",
+                count=n_trips,
+                rate=_pct(off, q),
+                base_rate=_pct(bare, q),
+                base_count=n_trips,
+                unit="ms",
+                note="the e2e suite's gateway without its HTTP endpoint; baseline: bare broker echo"
+                if label == "p50"
+                else "",
+            )
+        )
     for variant, (samples, rate) in trips.items():
+        if variant == "console off":
+            continue
         for label, q, target in (("p50", 0.50, 1.0), ("p99", 0.99, 3.0)):
             note = ""
             if label == "p50":
-                note = f"e2e set-up; {variant}" + (f" (another process, {rate:.1f} states/s)" if rate else "")
-                note += "; baseline: bare broker echo (the e2e targets)"
+                note = f"{variant}" + (f" (another process, {rate:.1f} states/s)" if rate else "")
+                note += (
+                    "; baseline: the same gateway without its HTTP endpoint, interleaved (the e2e margins)"
+                )
             rows.append(
                 Row(
                     group="console",
                     case=f"x_rsdk_version_get round trip {label}, {variant}",
                     count=n_trips,
                     rate=_pct(samples, q),
-                    base_rate=_pct(bare, q),
+                    base_rate=_pct(off, q),
                     base_count=n_trips,
                     max_over_base=target,
                     unit="ms",
