@@ -158,6 +158,7 @@ class GatewayApp:
             on_events_reply=self.northbound.events_reply,
             drc=self.drc,
         )
+        self.drc.call_service = self.dispatcher.call_local  # drc_gimbal_reset runs as gimbal_reset
         for adapter in self.devices:
             await adapter.start(self.northbound)
         self.bridge.start()

@@ -40,12 +40,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import hashlib
+import json
 import logging
 import re
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -61,6 +62,7 @@ from gateway.mqtt import MqttBridge
 from gateway.ratelimit import TokenBucket
 from gateway.settings import BrokerSettings, GatewaySettings
 from schemas import ResultCode, TopicKind, echo_heart_beat, error_reply_from_validation, reply_for, topic
+from schemas.drc import STICK_MAX, STICK_NEUTRAL
 from schemas.registry import Registry
 
 log = logging.getLogger(__name__)
@@ -68,9 +70,10 @@ log = logging.getLogger(__name__)
 __all__ = ["DrcController", "MotionWriter"]
 
 ZERO = ds.ZERO
-#: how a drone_control is recognised before it is parsed (whatever the spacing around the colon)
-_STICK = re.compile(rb'"method"\s*:\s*"drone_control"')
+#: how a drone_control or stick_control is recognised before it is parsed (whatever the spacing)
+_STICK = re.compile(rb'"method"\s*:\s*"(?:drone|stick)_control"')
 _ESTOP = re.compile(rb'"method"\s*:\s*"drone_emergency_stop"')
+_STICK_SPAN = float(STICK_MAX - STICK_NEUTRAL)  # 660: full deflection of a stick_control channel
 
 
 @dataclass(frozen=True, slots=True)
@@ -273,6 +276,10 @@ class DrcController:
         self._push_task: asyncio.Task[None] | None = None
         self._pending_broker: dict[Any, Any] = {}  # link key -> drc_mode_enter's mqtt_broker, until opened
         self._failure_logged: dict[tuple[str, str], float] = {}
+        #: runs a services request (bytes) as the cloud's would be and returns its reply: the dispatcher's
+        #: ``call_local``, set by the app (drc_gimbal_reset is the gimbal_reset service over drc/down)
+        self.call_service: Callable[[bytes], Awaitable[bytes]] | None = None
+        self._forwarding: set[asyncio.Task[None]] = set()
         self.cmd_delay_ms = 0.0
         self.osd_hz = 10
         self.hsi_hz = 1
@@ -357,6 +364,8 @@ class DrcController:
             self._in_loop(self._spawn_open, action.session, action.link)
         elif isinstance(action, ds.CloseLink):
             self._in_loop(self._spawn_close, action.session)
+        elif isinstance(action, ds.Forward):
+            self._in_loop(self._spawn_forward, action.request)
         elif isinstance(action, ds.Failsafe):
             self._failsafe(action)
         elif isinstance(action, ds.Count):
@@ -608,9 +617,24 @@ class DrcController:
                     denied_result=int(problem[0]) if problem is not None else 0,
                 )
             )
+        elif method == "stick_control":
+            problem = self._authority_problem()
+            self._feed(
+                ds.Stick(
+                    now,
+                    session,
+                    _Down(via, request),
+                    int(request.data.seq),
+                    self._channels_to_body(request.data),
+                    authorized=problem is None,
+                    denied_result=int(problem[0]) if problem is not None else 0,
+                )
+            )
         elif method == "drone_emergency_stop":
             audit("emergency_stop", method=method, source="drc", seq=getattr(request.data, "seq", None))
             self._feed(ds.EStop(now, session, _Down(via, request)))
+        elif method == "drc_gimbal_reset":
+            self._feed(ds.PayloadCommand(now, session, _Down(via, request)))
 
     def emergency_stop(self) -> None:
         """An emergency stop from the gateway itself (the web console): the session event a drc/down
@@ -623,6 +647,23 @@ class DrcController:
         if self.cfg.swap_xy:  # x forward, y right
             return (x, y, float(data.h), float(data.w))
         return (y, -x, float(data.h), float(data.w))  # seed: +x left, +y forward
+
+    def _channels_to_body(self, data: Any) -> ds.SetPoint:
+        """``stick_control`` channels (364..1684, 1024 neutral) → body-frame forward, right, up (m/s) and
+        clockwise yaw rate (°/s): linear in the deflection ``(value - 1024) / 660``, full deflection giving
+        ``drc.stick_horizontal`` / ``stick_up`` / ``stick_down`` / ``stick_yaw_rate`` (docs/drc.md)."""
+        cfg = self.cfg
+
+        def deflection(value: int) -> float:
+            return (int(value) - STICK_NEUTRAL) / _STICK_SPAN
+
+        up = deflection(data.throttle)
+        return (
+            deflection(data.pitch) * cfg.stick_horizontal,
+            deflection(data.roll) * cfg.stick_horizontal,
+            up * (cfg.stick_up if up > 0 else cfg.stick_down),
+            deflection(data.yaw) * cfg.stick_yaw_rate,
+        )
 
     def _answer_down(self, action: ds.StickReply) -> None:
         token = action.request
@@ -640,15 +681,45 @@ class DrcController:
             reply = echo_heart_beat(request)
         else:
             output: dict[str, Any] | None = None
-            if method == "drone_control":
+            if method in ("drone_control", "stick_control"):
                 output = {"seq": action.seq}
                 if action.reason:
                     output["reason"] = action.reason
                 if action.result == 0:
                     self.metrics.inc("drc_sticks_total")
+                    if method == "stick_control":  # DJI: "this protocol has no reply"; refusals are told
+                        return
             elif action.reason:
                 output = {"reason": action.reason}
             reply = reply_for(request, int(action.result), output)
+        token.via.publish(self.up_topic, reply.model_dump_json().encode(), qos=0)
+
+    # ------------------------------------------------------------ payload commands (the loop)
+    def _spawn_forward(self, token: _Down) -> None:
+        task = self.loop.create_task(self._forward(token), name="drc-payload-command")
+        self._forwarding.add(task)
+        task.add_done_callback(self._forwarding.discard)
+
+    async def _forward(self, token: _Down) -> None:
+        """``drc_gimbal_reset`` → the ``gimbal_reset`` service through the dispatcher (validation, routing by
+        ``payload_index``, payload authority, deadline, metrics, audit), answered on drc/up."""
+        request = token.message
+        data = request.data.model_dump(mode="json", include={"payload_index", "reset_mode"})
+        result, output = int(ResultCode.INTERNAL_ERROR), {"reason": "no dispatcher to carry it out"}
+        if self.call_service is not None:
+            body = {
+                "tid": f"drc-{request.method}-{self.clock.time_ms()}",
+                "bid": "drc",
+                "timestamp": self.clock.time_ms(),
+                "gateway": self.gw,
+                "method": "gimbal_reset",
+                "data": data,
+            }
+            raw = await self.call_service(json.dumps(body).encode())
+            answer = json.loads(raw)["data"] if raw else {"result": int(ResultCode.INTERNAL_ERROR)}
+            result, output = int(answer["result"]), answer.get("output")
+        reason = output.get("reason") if isinstance(output, dict) else None
+        reply = reply_for(request, result, {"reason": reason} if reason else None)
         token.via.publish(self.up_topic, reply.model_dump_json().encode(), qos=0)
 
     # ------------------------------------------------------------------------- writer thread
@@ -720,10 +791,17 @@ class DrcController:
 
     # ------------------------------------------------------------------------- pushes (the loop)
     async def _pushes(self) -> None:
-        next_osd = next_hsi = next_delay = 0.0
+        next_osd = next_hsi = next_delay = next_state = next_batteries = 0.0
+        state_hz, batteries_hz = self.cfg.drone_state_hz, self.cfg.batteries_hz
         while True:
             now = self.now()
             try:
+                if state_hz > 0 and now >= next_state:
+                    next_state = max(next_state + 1.0 / state_hz, now)
+                    self._push("drc_drone_state_push", self._drone_state())
+                if batteries_hz > 0 and now >= next_batteries:
+                    next_batteries = max(next_batteries + 1.0 / batteries_hz, now)
+                    self._push("drc_batteries_info_push", self._batteries())
                 if now >= next_osd:
                     next_osd = now + 1.0 / self.osd_hz
                     self._push("osd_info_push", self._osd_info())
@@ -783,7 +861,20 @@ class DrcController:
             "gimbal_pitch": g_pitch,
             "gimbal_roll": g_roll,
             "gimbal_yaw": g_yaw,
+            "elevation": t.height,
         }
+
+    def _drone_state(self) -> dict[str, Any] | None:
+        """``drc_drone_state_push``: the aircraft's ``mode_code`` (what its osd says); nothing without one."""
+        aircraft = self._aircraft()
+        return {"mode_code": aircraft.mode_code()} if aircraft is not None else None
+
+    def _batteries(self) -> dict[str, Any] | None:
+        """``drc_batteries_info_push``: the aircraft osd's ``battery`` struct; nothing before it is known."""
+        aircraft = self._aircraft()
+        snapshot = aircraft.osd_snapshot() if aircraft is not None else None
+        battery = snapshot.get("battery") if snapshot else None
+        return dict(battery) if battery else None
 
     def _hsi_info(self) -> dict[str, Any]:
         """Obstacle distances from the flight controller when it reports them (resampled onto the seed's

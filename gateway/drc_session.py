@@ -36,6 +36,9 @@ on the session that was current when it arrived, and one session's link is close
 one's is opened (at most one DRC link at any time). Every ``Enter`` and ``Exit`` is answered exactly
 once (:class:`Reply`), queued ones included; ``Shutdown`` answers whatever is queued.
 
+Payload commands (:class:`PayloadCommand`, ``drc_gimbal_reset``) move a device once: they are
+forwarded (:class:`Forward`) only while no failsafe holds, and refused like sticks while one does.
+
 Motion: :class:`Motion` carries the set-point every driven device must hold from now on (forward,
 right, up m/s, yaw rate °/s) and whether it is streamed; the caller's single writer sends it. Any of
 exit, emergency stop, heartbeat loss, stick loss, broker loss, authority loss or shutdown emits a
@@ -68,6 +71,7 @@ __all__ = [
     "Event",
     "Exit",
     "Failsafe",
+    "Forward",
     "Heartbeat",
     "LinkClosed",
     "LinkFailed",
@@ -76,6 +80,7 @@ __all__ = [
     "Motion",
     "Notify",
     "OpenLink",
+    "PayloadCommand",
     "Reply",
     "Report",
     "SessionConfig",
@@ -170,8 +175,9 @@ class LinkClosed:
 
 @dataclass(frozen=True, slots=True)
 class Stick:
-    """One ``drone_control``: ``setpoint`` already in the body frame; ``authorized`` as the caller
-    found the control authority when it arrived; ``session`` the link it came in on."""
+    """One ``drone_control`` or ``stick_control``: ``setpoint`` already in the body frame;
+    ``authorized`` as the caller found the control authority when it arrived; ``session`` the link it
+    came in on."""
 
     at: float
     session: int | None
@@ -191,6 +197,16 @@ class Heartbeat:
 
 @dataclass(frozen=True, slots=True)
 class EStop:
+    at: float
+    session: int | None
+    request: Hashable
+
+
+@dataclass(frozen=True, slots=True)
+class PayloadCommand:
+    """A drc/down command that moves a payload once (``drc_gimbal_reset``): carried out only while the
+    session drives freely; the caller checks authority and routes it (:class:`Forward`)."""
+
     at: float
     session: int | None
     request: Hashable
@@ -218,8 +234,8 @@ class Shutdown:
 
 
 Event = (
-    Enter | Exit | LinkUp | LinkFailed | LinkClosed | Stick | Heartbeat | EStop | Tick | BrokerLost
-    | AuthorityLost | Shutdown
+    Enter | Exit | LinkUp | LinkFailed | LinkClosed | Stick | Heartbeat | EStop | PayloadCommand | Tick
+    | BrokerLost | AuthorityLost | Shutdown
 )  # fmt: skip
 
 
@@ -290,6 +306,13 @@ class StickReply:
 
 
 @dataclass(frozen=True, slots=True)
+class Forward:
+    """Carry out a :class:`PayloadCommand` (and answer it with the device's result)."""
+
+    request: Hashable
+
+
+@dataclass(frozen=True, slots=True)
 class Failsafe:
     """A failsafe fired (count it, log it, tell the monitor); ``None``: the last one cleared."""
 
@@ -306,8 +329,9 @@ class Count:
 
 
 Action = (
-    Motion | EmergencyStop | OpenLink | CloseLink | Report | Notify | Reply | StickReply | Failsafe | Count
-)
+    Motion | EmergencyStop | OpenLink | CloseLink | Report | Notify | Reply | StickReply | Forward | Failsafe
+    | Count
+)  # fmt: skip
 
 
 @dataclass(slots=True)
@@ -345,6 +369,7 @@ class DrcSession:
             Stick: self._on_stick,
             Heartbeat: self._on_heartbeat,
             EStop: self._on_estop,
+            PayloadCommand: self._on_payload_command,
             Tick: self._on_tick,
             BrokerLost: self._on_broker_lost,
             AuthorityLost: self._on_authority_lost,
@@ -588,6 +613,24 @@ class DrcSession:
             s.sticks_fresh = False
             self.state = State.HOLDING
         out.add(StickReply(event.request, SUCCESS))
+
+    def _on_payload_command(self, out: _Out, event: object) -> None:
+        assert isinstance(event, PayloadCommand)
+        s = self._current(event.session)
+        if s is not None and self._expire(out, event.at):
+            s = self._current(event.session)
+        if s is None:
+            out.add(Count("not_entered"))
+            return
+        if Hold.HEARTBEAT in s.holds:
+            out.add(Count("held"))
+            reason = "no heartbeat: held until heartbeats resume"
+            out.add(StickReply(event.request, DRC_HEARTBEAT_TIMEOUT, None, reason))
+        elif Hold.ESTOP in s.holds:
+            out.add(Count("held"))
+            out.add(StickReply(event.request, BUSY, None, "emergency stop holds until seq restarts at 0"))
+        else:
+            out.add(Forward(event.request))
 
     # ------------------------------------------------------------------------------- losses
     def _on_tick(self, out: _Out, event: object) -> None:

@@ -56,6 +56,7 @@ def simulated_settings(base: dict[str, Any]) -> dict[str, Any]:
             "payload_index": SIM_GIMBAL_PAYLOAD_INDEX,
             "interface": "virtual",
             "channel": f"djigw-sim-{SIM_GIMBAL_SN}",
+            "drc_drive": True,  # live-control sticks turn it (with payload authority): docs/drc.md
         }
     )
     devices.append(

@@ -229,6 +229,18 @@ class DrcSettings(BaseModel):
     x_sign: Literal[1, -1] = Field(1, description="seed: +x is left; -1 when your cloud sends +x right")
     y_sign: Literal[1, -1] = Field(1, description="seed: +y is forward; -1 when your cloud sends +y back")
     swap_xy: bool = Field(False, description="true when your cloud sends x forward and y sideways")
+    stick_horizontal: float = Field(
+        10.0, gt=0, le=17, description="stick_control: m/s forward/right at full roll or pitch (1024 ± 660)"
+    )
+    stick_up: float = Field(5.0, gt=0, le=5, description="stick_control: m/s up at full throttle")
+    stick_down: float = Field(4.0, gt=0, le=4, description="stick_control: m/s down at zero throttle")
+    stick_yaw_rate: float = Field(90.0, gt=0, le=90, description="stick_control: °/s clockwise at full yaw")
+    drone_state_hz: float = Field(
+        1.0, ge=0, le=10, description="drc_drone_state_push a second during DRC (0: not sent)"
+    )
+    batteries_hz: float = Field(
+        1.0, ge=0, le=10, description="drc_batteries_info_push a second during DRC (0: not sent)"
+    )
 
 
 class MetricsSettings(BaseModel):

@@ -1,8 +1,10 @@
-"""``data`` of the DRC (live flight control) messages of seed 003: ``drc/down`` and ``drc/up``.
+"""``data`` of the DRC (live flight control) messages of seed 003: ``drc/down`` and ``drc/up``, and the
+newer ones of DJI's Cloud API docs for Dock 2/3 and RC Plus 2 (``stick_control``, ``drc_gimbal_reset``,
+``drc_drone_state_push``, ``drc_batteries_info_push``; docs/cloud-api.md).
 
 Owns stick commands, emergency stop, heartbeats and the high-rate pushes (obstacle distances, link delay,
-osd). Knows nothing about watchdogs or devices: the seq rules (reject older, accept repeats) belong to the
-dispatcher; this module only types the values.
+osd, aircraft state, battery). Knows nothing about watchdogs or devices: the seq rules (reject older,
+accept repeats) belong to the DRC session; this module only types the values.
 """
 
 from __future__ import annotations
@@ -22,9 +24,12 @@ from .base import (
     Seq,
     Text,
     TimestampMs,
+    int_enum,
 )
 from .envelope import EmptyRequest
+from .osd import Battery, ModeCode
 from .results import ResultValue
+from .services import GimbalReset
 
 Distance = Annotated[int, Field(strict=True, ge=0, json_schema_extra={"x-unit": "mm"})]
 DelayMs = Annotated[int, Field(strict=True, ge=0, json_schema_extra={"x-unit": "ms"})]
@@ -70,6 +75,49 @@ class DroneControl(InboundModel):
         json_schema_extra={"x-unit": "°/s"},
         description="Yaw rate (°/s); positive is clockwise.",
     )
+
+
+#: RC channel values of ``stick_control`` (DJI Cloud API, Dock 3 / RC Plus 2 "DRC-杆量控制"): 1024 ± 660.
+STICK_MIN, STICK_NEUTRAL, STICK_MAX = 364, 1024, 1684
+Channel = Annotated[
+    int,
+    Field(strict=True, ge=STICK_MIN, le=STICK_MAX, json_schema_extra={"x-unit": "RC channel value"}),
+]
+
+
+class StickControl(InboundModel):
+    """Stick channels (DJI Cloud API docs, Dock 3 and RC Plus 2 § DRC-stick control, method
+    ``stick_control``; docs/cloud-api.md has the links). Sent at 5..10 Hz; DJI's device sends no reply.
+
+    Each channel is an RC value in 364..1684, 1024 neutral (1024 ± 660): ``roll`` (A channel) larger is
+    right, ``pitch`` (E) larger is forward, ``throttle`` (T) larger is up, ``yaw`` (R) larger is clockwise.
+    ``seq`` beside ``data`` is required (the same seq rules as ``drone_control``). An absent channel is
+    neutral. ``gimbal_pitch`` appears in DJI's Dock 3 example but not in its table: accepted at 1024 only
+    (the gimbal's pitch follows ``throttle`` on a gateway gimbal, docs/drc.md), any other value is refused
+    (325001) rather than ignored.
+    """
+
+    envelope_fields: ClassVar[dict[str, tuple[str, ...]]] = {"seq": ("seq",)}
+
+    seq: Seq = Field(description="Increasing; 0 restarts the sequence (as drone_control).")
+    roll: Channel = Field(default=STICK_NEUTRAL, description="A channel: lateral; > 1024 right.")
+    pitch: Channel = Field(default=STICK_NEUTRAL, description="E channel: longitudinal; > 1024 forward.")
+    throttle: Channel = Field(default=STICK_NEUTRAL, description="T channel: vertical; > 1024 up.")
+    yaw: Channel = Field(default=STICK_NEUTRAL, description="R channel: yaw; > 1024 clockwise.")
+    gimbal_pitch: Annotated[int, Field(strict=True, ge=STICK_NEUTRAL, le=STICK_NEUTRAL)] | None = Field(
+        default=None,
+        description="In DJI's Dock 3 example only: accepted at the neutral 1024; other values are refused.",
+    )
+
+
+class DrcGimbalReset(GimbalReset):
+    """Reset the gimbal over DRC (DJI Cloud API docs, RC Plus 2 § payload control - reset the gimbal,
+    method ``drc_gimbal_reset``): the same ``payload_index`` and ``reset_mode`` as the ``gimbal_reset``
+    service, ``seq`` beside ``data``; answered on drc/up with ``result``."""
+
+    envelope_fields: ClassVar[dict[str, tuple[str, ...]]] = {"seq": ("seq",)}
+
+    seq: Seq | None = None
 
 
 class DroneControlOutput(OutboundModel):
@@ -195,10 +243,47 @@ class OsdInfoPush(OutboundModel):
     gimbal_pitch: GimbalAngle
     gimbal_roll: GimbalAngle
     gimbal_yaw: GimbalAngle
+    elevation: Float | None = Field(
+        default=None,
+        description="Height above the take-off point (m): the osd's elevation, read by RC Plus clients.",
+        json_schema_extra={"x-unit": "m"},
+    )
+
+
+class DrcDroneStatePush(OutboundModel):
+    """Aircraft state during DRC (DJI Cloud API docs, Dock 2/3 and RC Plus 2 § report aircraft state,
+    method ``drc_drone_state_push`` on drc/up), at ``drc.drone_state_hz``.
+
+    ``mode_code`` is the osd's. DJI's table also lists ``stealth_state``, ``night_lights_state``,
+    ``landing_type`` and ``landing_protection_type``: optional here, and left out by a device that has no
+    such thing to report (the Onboard SDK flight controller has no stealth mode, night lights or landing
+    protection), never invented.
+    """
+
+    mode_code: int_enum(ModeCode) = Field(description="Aircraft state, as in the osd.")
+    stealth_state: Bool | None = None
+    night_lights_state: Bool | None = None
+    landing_type: Annotated[int, Field(strict=True, ge=0, le=4)] | None = None
+    landing_protection_type: Annotated[int, Field(strict=True, ge=0, le=3)] | None = None
+
+
+class DrcBatteriesInfoPush(Battery):
+    """Battery during DRC (method ``drc_batteries_info_push`` on drc/up), at ``drc.batteries_hz``.
+
+    DJI's public Cloud API pages do not define this push (docs/cloud-api.md says where we looked); clients
+    written for RC Plus read ``data.capacity_percent``. Decision: the aircraft osd's ``battery`` struct
+    (``capacity_percent``, ``remain_flight_time``, ``batteries[]``), the Cloud API's own names.
+    """
 
 
 __all__ = [
+    "STICK_MAX",
+    "STICK_MIN",
+    "STICK_NEUTRAL",
     "DelayInfoPush",
+    "DrcBatteriesInfoPush",
+    "DrcDroneStatePush",
+    "DrcGimbalReset",
     "DroneControl",
     "DroneControlOutput",
     "DroneControlReply",
@@ -208,4 +293,5 @@ __all__ = [
     "HsiInfoPush",
     "LiveviewDelay",
     "OsdInfoPush",
+    "StickControl",
 ]

@@ -8,10 +8,11 @@ a device emits them.
 from __future__ import annotations
 
 import enum
+from typing import Annotated
 
 from pydantic import Field
 
-from .base import Int, OutboundModel, Text, enum_description, int_enum
+from .base import Float, Int, Latitude, Longitude, OutboundModel, Text, enum_description, int_enum
 from .results import ResultValue
 from .state import DrcState, DrcStateField
 
@@ -57,13 +58,36 @@ _JOYSTICK = enum_description(
 )
 
 
+Remaining = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0)]
+
+
+class PathPoint(OutboundModel):
+    """One point of ``planned_path_points`` (DJI Cloud API docs, Dock 3 § flyto result event)."""
+
+    latitude: Latitude
+    longitude: Longitude
+    height: Float = Field(description="Ellipsoid (WGS84) height (m).", json_schema_extra={"x-unit": "m"})
+
+
 class FlyToPointProgress(OutboundModel):
-    """Fly-to progress (seed 003 § Event notification of flyto result)."""
+    """Fly-to progress (seed 003 § Event notification of flyto result; ``remaining_distance``,
+    ``remaining_time`` and ``planned_path_points`` from DJI's newer docs, Dock 3 § flyto result event,
+    docs/cloud-api.md). Sent at each point, at the end, and periodically (at least once a second) while
+    the aircraft flies."""
 
     fly_to_id: Text = Field(min_length=1, description="The fly_to_id of the fly_to_point request.")
     status: FlyToStatus = Field(description=_FLY_TO_STATUS)
     result: ResultValue
     way_point_index: Int = Field(ge=0, description="Index of the point being flown.")
+    remaining_distance: Remaining | None = Field(
+        default=None, description="Distance left to fly (m).", json_schema_extra={"x-unit": "m"}
+    )
+    remaining_time: Remaining | None = Field(
+        default=None, description="Time left at the planned speed (s).", json_schema_extra={"x-unit": "s"}
+    )
+    planned_path_points: list[PathPoint] | None = Field(
+        default=None, max_length=256, description="The points being flown to, as requested."
+    )
 
 
 class TakeoffToPointProgress(OutboundModel):
@@ -96,6 +120,7 @@ __all__ = [
     "FlyToStatus",
     "JoystickInvalidNotify",
     "JoystickInvalidReason",
+    "PathPoint",
     "TakeoffStatus",
     "TakeoffToPointProgress",
 ]

@@ -33,6 +33,9 @@ from pydantic_core import PydanticCustomError
 from .base import EXTENSION_PREFIX, ContractModel, InboundModel, OutboundModel
 from .drc import (
     DelayInfoPush,
+    DrcBatteriesInfoPush,
+    DrcDroneStatePush,
+    DrcGimbalReset,
     DroneControl,
     DroneControlReply,
     DroneEmergencyStop,
@@ -40,6 +43,7 @@ from .drc import (
     HeartBeatEcho,
     HsiInfoPush,
     OsdInfoPush,
+    StickControl,
 )
 from .envelope import (
     METHOD_BASES,
@@ -121,9 +125,15 @@ def _seed(kind: TopicKind, method: str, data: type, reply: type | None, section:
     return MethodSpec(TopicKind(kind), method, data, reply, section, f"seed 003 § {section}")
 
 
+def _dji(kind: TopicKind, method: str, data: type, reply: type | None, section: str) -> MethodSpec:
+    """A method of DJI's public Cloud API docs beyond seed 003 (docs/cloud-api.md has the pages)."""
+    return MethodSpec(TopicKind(kind), method, data, reply, section, f"DJI Cloud API docs § {section}")
+
+
 _S, _E, _DD, _DU = TopicKind.SERVICES, TopicKind.EVENTS, TopicKind.DRC_DOWN, TopicKind.DRC_UP
 
-#: Every method of seed 003 (plus update_topo from PROTOCOL-NOTES): kind, method, body, reply body, section.
+#: Every method of seed 003 (plus update_topo from PROTOCOL-NOTES and the newer DRC methods of DJI's docs):
+#: kind, method, body, reply body, section.
 SEED_METHODS: tuple[MethodSpec, ...] = (
     _seed(
         _E, "fly_to_point_progress", FlyToPointProgress, InboundResult, "Event notification of flyto result"
@@ -176,6 +186,10 @@ SEED_METHODS: tuple[MethodSpec, ...] = (
         "DRC-delay information pushing of image transmission link",
     ),
     _seed(_DU, "osd_info_push", OsdInfoPush, None, "DRC-high frequency osd information pushing"),
+    _dji(_DD, "stick_control", StickControl, DroneControlReply, "DRC-stick control (Dock 3, RC Plus 2)"),
+    _dji(_DD, "drc_gimbal_reset", DrcGimbalReset, ResultReply, "Reset the gimbal (RC Plus 2)"),
+    _dji(_DU, "drc_drone_state_push", DrcDroneStatePush, None, "Report aircraft state (Dock 2/3, RC Plus 2)"),
+    _dji(_DU, "drc_batteries_info_push", DrcBatteriesInfoPush, None, "Battery push (RC Plus clients)"),
     MethodSpec(
         TopicKind.STATUS,
         "update_topo",

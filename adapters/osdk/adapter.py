@@ -16,7 +16,8 @@ Cloud API method             Onboard SDK commands
 flight_authority_grab        0x01 0x00 obtain (re-sent with a new seq while the FC says "in progress")
 fly_to_point                 0x03 0x10 init (degrees → radians, WGS84 height → height above take-off,
                              ``max_speed`` → idle velocity), one 0x03 0x11 per point, 0x03 0x12 start;
-                             then ``fly_to_point_progress`` from the 0x02 0x04 events
+                             then ``fly_to_point_progress`` from the 0x02 0x04 events and
+                             every 0.5 s in between (remaining distance and time)
 fly_to_point_stop            0x03 0x12 cancel → ``wayline_cancel``
 takeoff_to_point             0x01 0x01 take-off; once airborne a 2-point mission (straight up to
                              ``security_takeoff_height``, then the target) with
@@ -77,6 +78,11 @@ CONTROL_OBTAINED, CONTROL_RELEASED = 0x0002, 0x0001
 CONTROL_IN_PROGRESS = (0x0003, 0x0004)
 CONTROL_RC_OWNS = (0x0000, 0x0005, 0x0006)
 AUTO_TAKEOFF = 11  # display mode while the FC's own take-off runs: missions are refused until it ends
+#: fly_to_point_progress while flying between points: twice a second, so the cloud hears from the flight
+#: at least once a second (DJI's devices report it continuously; the seed's waypoint events alone leave a
+#: 250 m leg silent for its whole 24 s)
+PROGRESS_INTERVAL = 0.5
+EARTH_RADIUS = 6_378_137.0  # m (WGS84 equatorial): the local flat-earth distances of progress events
 
 
 @dataclass
@@ -117,6 +123,17 @@ class Task:
     offset: int = 0  # waypoints the gateway prepended: the cloud's index = mission index - offset
     finished: bool = False
     failed: int | None = None
+    path: list[tuple[float, float, float]] = field(default_factory=list)  # lat, lon, m above take-off
+    speed: float = 0.0  # the mission's planned speed (m/s)
+    planned: list[dict[str, float]] = field(default_factory=list)  # the cloud's points (WGS84 height)
+
+
+def _leg(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
+    """Straight-line distance (m) between two (lat, lon, height) points, flat-earth (legs of a fly-to are
+    at most a few km: the error is far below a metre)."""
+    north = math.radians(b[0] - a[0]) * EARTH_RADIUS
+    east = math.radians(b[1] - a[1]) * EARTH_RADIUS * math.cos(math.radians((a[0] + b[0]) / 2))
+    return math.sqrt(north * north + east * east + (b[2] - a[2]) ** 2)
 
 
 def _quat_to_euler(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:
@@ -625,13 +642,29 @@ class AircraftAdapter(SupervisedAdapter):
                     ResultCode.BUSY, f"waypoint {index} acknowledged as {ack.fields.get('index')}"
                 )
 
-    def _progress(self, task: Task, status: str, index: int, result: int = 0) -> None:
+    def _remaining(self, task: Task, status: str) -> float:
+        """Metres left to fly: from where the aircraft is to the next point not yet reached, then along
+        the remaining legs; 0 once arrived."""
+        t = self.telemetry
+        if status == "wayline_ok" or not task.path or t.latitude is None:
+            return 0.0
+        here = (t.latitude, t.longitude or 0.0, t.height or 0.0)
+        ahead = task.path[min(len(task.path) - 1, max(task.reached + 1, task.offset)) :]
+        return sum(_leg(a, b) for a, b in zip([here, *ahead], ahead, strict=False))
+
+    def _progress(
+        self, task: Task, status: str, index: int, result: int = 0, *, need_reply: bool = True
+    ) -> None:
         if self._sink is None:
             return
         index = max(0, index)
         if task.kind == "fly_to":
-            data = {"fly_to_id": task.task_id, "status": status, "result": result, "way_point_index": index}
-            self._sink.event(self.info.sn, "fly_to_point_progress", data, need_reply=True)
+            left = self._remaining(task, status)
+            data = {"fly_to_id": task.task_id, "status": status, "result": result, "way_point_index": index,
+                    "remaining_distance": round(left, 1),
+                    "remaining_time": round(left / task.speed, 1) if task.speed > 0 else 0.0,
+                    "planned_path_points": task.planned}  # fmt: skip
+            self._sink.event(self.info.sn, "fly_to_point_progress", data, need_reply=need_reply)
         else:
             data = {"flight_id": task.task_id, "track_id": "", "status": status, "result": result,
                     "way_point_index": index}  # fmt: skip
@@ -643,6 +676,14 @@ class AircraftAdapter(SupervisedAdapter):
         self._mission_task = asyncio.get_running_loop().create_task(self._watch(task))
 
     async def _watch(self, task: Task) -> None:
+        while task.kind == "fly_to" and not task.done.is_set():
+            # between the waypoint events the flight reports itself periodically: a progress superseded
+            # within the interval is not re-sent (need_reply 0); the events of a point, the end, a
+            # cancel or a failure still ask for a reply
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(task.done.wait(), PROGRESS_INTERVAL)
+            if not task.done.is_set() and not task.finished:
+                self._progress(task, "wayline_progress", task.reached - task.offset, need_reply=False)
         await task.done.wait()
         last = task.points - 1 - task.offset
         if task.failed is not None:
@@ -666,7 +707,11 @@ class AircraftAdapter(SupervisedAdapter):
         here = (t.latitude or 0.0, t.longitude or 0.0, t.height or 0.0)
         points = [here, *((p.latitude, p.longitude, self._relative(p.height)) for p in data.points)]
         await self._upload(points, data.max_speed)
-        task = Task("fly_to", data.fly_to_id, len(points), offset=1)
+        task = Task("fly_to", data.fly_to_id, len(points), offset=1, path=points)
+        task.speed = max(1.0, min(float(data.max_speed), self.settings.mission_vel_cmd_range))
+        task.planned = [
+            {"latitude": p.latitude, "longitude": p.longitude, "height": p.height} for p in data.points
+        ]
         self.mission = task
         await self._gs("wp_start_stop", {"start": 0})
         self._start_watch(task)
