@@ -62,7 +62,6 @@ from gateway.mqtt import MqttBridge
 from gateway.ratelimit import TokenBucket
 from gateway.settings import BrokerSettings, GatewaySettings
 from schemas import ResultCode, TopicKind, echo_heart_beat, error_reply_from_validation, reply_for, topic
-from schemas.drc import STICK_MAX, STICK_NEUTRAL
 from schemas.registry import Registry
 
 log = logging.getLogger(__name__)
@@ -73,7 +72,6 @@ ZERO = ds.ZERO
 #: how a drone_control or stick_control is recognised before it is parsed (whatever the spacing)
 _STICK = re.compile(rb'"method"\s*:\s*"(?:drone|stick)_control"')
 _ESTOP = re.compile(rb'"method"\s*:\s*"drone_emergency_stop"')
-_STICK_SPAN = float(STICK_MAX - STICK_NEUTRAL)  # 660: full deflection of a stick_control channel
 
 
 @dataclass(frozen=True, slots=True)
@@ -266,6 +264,10 @@ class DrcController:
         )
         self._lock = threading.Lock()  # every call into the session, and the actions it returns
         self._stick_budget = self._new_stick_budget()  # network threads only
+        #: full stick_control deflection (drc.stick_*): docs/drc.md
+        self._stick_limits = ds.StickLimits(
+            self.cfg.stick_horizontal, self.cfg.stick_up, self.cfg.stick_down, self.cfg.stick_yaw_rate
+        )
         self._up: MqttBridge = main_bridge  # where the current session answers
         self._links: dict[int, MqttBridge | None] = {}  # session id -> its dedicated link (None: main)
         self._opening: dict[int, asyncio.Task[None]] = {}
@@ -618,6 +620,7 @@ class DrcController:
                 )
             )
         elif method == "stick_control":
+            d = request.data
             problem = self._authority_problem()
             self._feed(
                 ds.Stick(
@@ -625,7 +628,7 @@ class DrcController:
                     session,
                     _Down(via, request),
                     int(request.data.seq),
-                    self._channels_to_body(request.data),
+                    ds.channels_to_setpoint(d.roll, d.pitch, d.throttle, d.yaw, self._stick_limits),
                     authorized=problem is None,
                     denied_result=int(problem[0]) if problem is not None else 0,
                 )
@@ -647,23 +650,6 @@ class DrcController:
         if self.cfg.swap_xy:  # x forward, y right
             return (x, y, float(data.h), float(data.w))
         return (y, -x, float(data.h), float(data.w))  # seed: +x left, +y forward
-
-    def _channels_to_body(self, data: Any) -> ds.SetPoint:
-        """``stick_control`` channels (364..1684, 1024 neutral) → body-frame forward, right, up (m/s) and
-        clockwise yaw rate (°/s): linear in the deflection ``(value - 1024) / 660``, full deflection giving
-        ``drc.stick_horizontal`` / ``stick_up`` / ``stick_down`` / ``stick_yaw_rate`` (docs/drc.md)."""
-        cfg = self.cfg
-
-        def deflection(value: int) -> float:
-            return (int(value) - STICK_NEUTRAL) / _STICK_SPAN
-
-        up = deflection(data.throttle)
-        return (
-            deflection(data.pitch) * cfg.stick_horizontal,
-            deflection(data.roll) * cfg.stick_horizontal,
-            up * (cfg.stick_up if up > 0 else cfg.stick_down),
-            deflection(data.yaw) * cfg.stick_yaw_rate,
-        )
 
     def _answer_down(self, action: ds.StickReply) -> None:
         token = action.request

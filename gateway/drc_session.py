@@ -87,12 +87,42 @@ __all__ = [
     "Shutdown",
     "State",
     "Stick",
+    "StickLimits",
     "StickReply",
     "Tick",
+    "channels_to_setpoint",
 ]
 
 SetPoint = tuple[float, float, float, float]  # forward, right, up (m/s), yaw rate (°/s, clockwise)
 ZERO: SetPoint = (0.0, 0.0, 0.0, 0.0)
+
+#: ``stick_control`` channel values (the same as schemas.drc's; plain ints so nothing of the contract
+#: layer is imported): 1024 is neutral, 1024 ± 660 full deflection.
+STICK_NEUTRAL, STICK_SPAN = 1024, 660
+
+
+@dataclass(frozen=True, slots=True)
+class StickLimits:
+    """What a full ``stick_control`` deflection asks for (``drc.stick_*`` settings)."""
+
+    horizontal: float = 10.0  # m/s forward (pitch) and right (roll)
+    up: float = 5.0  # m/s at full throttle
+    down: float = 4.0  # m/s at zero throttle
+    yaw_rate: float = 90.0  # °/s clockwise at full yaw
+
+
+def channels_to_setpoint(roll: int, pitch: int, throttle: int, yaw: int, limits: StickLimits) -> SetPoint:
+    """RC channels (364..1684, 1024 neutral) → forward, right, up (m/s) and clockwise yaw rate (°/s),
+    linear in each channel's deflection ``(value - 1024) / 660`` (DJI: roll larger = right, pitch larger
+    = forward, throttle larger = up, yaw larger = clockwise); 1024 on every channel is ZERO (hover)."""
+    up = (throttle - STICK_NEUTRAL) / STICK_SPAN
+    return (
+        (pitch - STICK_NEUTRAL) / STICK_SPAN * limits.horizontal,
+        (roll - STICK_NEUTRAL) / STICK_SPAN * limits.horizontal,
+        up * (limits.up if up > 0 else limits.down),
+        (yaw - STICK_NEUTRAL) / STICK_SPAN * limits.yaw_rate,
+    )
+
 
 # Cloud API result codes used here (the same values as schemas.ResultCode; kept as plain ints so this
 # module imports nothing of the contract layer).

@@ -9,7 +9,10 @@ messages from stale links) on a manual clock, and checks after every step:
 * at most one session, and at most one DRC link open or opening or closing at any time;
 * the drc_state last reported equals the real state;
 * every enter/exit is answered exactly once (checked again after all links settle), every stick,
-  heartbeat and stop at most once, and an exit answered 0 leaves drc_state 0 and no motion.
+  heartbeat and stop at most once, and an exit answered 0 leaves drc_state 0 and no motion;
+* ``stick_control`` (RC channels, each message five times, as DJI's reference cloud sends) obeys the
+  same rules as ``drone_control``; a payload command (``drc_gimbal_reset``) is carried out only while
+  the session drives freely (no emergency stop, heartbeats fresh).
 
 Plus example tests for the orders that broke the old controller.
 """
@@ -19,14 +22,17 @@ from __future__ import annotations
 import itertools
 from typing import Any
 
-from hypothesis import HealthCheck, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, precondition, rule
 
 from gateway import drc_session as ds
+from schemas.drc import STICK_MAX, STICK_MIN, STICK_NEUTRAL
 
 CFG = ds.SessionConfig(stick_timeout=0.5, heartbeat_timeout=3.0, idle_timeout=60.0)
 MOVE = (1.0, -2.0, 0.5, 10.0)
+LIMITS = ds.StickLimits()
+CHANNEL = st.sampled_from([364, 700, 1024, 1024, 1024, 1354, 1684])
 
 
 class _Req:
@@ -73,7 +79,8 @@ class Harness:
         elif isinstance(event, ds.LinkClosed) and event.session in self.closing:
             self.closing.discard(event.session)
         # the machine is told the time by every tick, and by every stick on the current session's link
-        if isinstance(event, ds.Tick) or (isinstance(event, ds.Stick) and event.session == self.m.session_id):
+        told = isinstance(event, ds.Stick | ds.PayloadCommand) and event.session == self.m.session_id
+        if isinstance(event, ds.Tick) or told:
             self.observed_at = event.at
         repeat = (
             isinstance(event, ds.Stick)
@@ -110,6 +117,13 @@ class Harness:
                 self.opening.discard(a.session)
                 self.open.discard(a.session)
                 self.closing.add(a.session)
+            elif isinstance(a, ds.Forward):
+                assert isinstance(event, ds.PayloadCommand) and a.request is event.request
+                assert self.m.state is ds.State.ACTIVE, f"payload command carried out in {self.m.state}"
+                assert not self.estop_hold, "payload command carried out through an emergency stop"
+                assert event.at - self.hb_at <= CFG.heartbeat_timeout, "payload command without heartbeats"
+                self.answers.setdefault(a.request, []).append(0)
+                assert len(self.answers[a.request]) == 1, f"{a.request} forwarded twice"
             elif isinstance(a, ds.Reply | ds.StickReply):
                 req = a.request
                 if isinstance(req, _Req):
@@ -267,6 +281,29 @@ class DrcSessionMachine(RuleBasedStateMachine):
         sid = h.m.session_id
         session = None if stale or sid is None else sid
         h.feed(ds.Stick(h.now, session, h.request("stick"), self.seq, setpoint, authorized))
+
+    @rule(
+        step=st.sampled_from([1, 1, 1, 2, 0, -1, "restart"]),
+        channels=st.tuples(CHANNEL, CHANNEL, CHANNEL, CHANNEL),
+        authorized=st.sampled_from([True, True, True, False]),
+        copies=st.sampled_from([1, 5, 5]),
+    )
+    def stick_control(
+        self, step: int | str, channels: tuple[int, int, int, int], authorized: bool, copies: int
+    ) -> None:
+        """``stick_control``: RC channels mapped as the shell maps them, each message ``copies`` times."""
+        h = self.h
+        self.seq = 0 if step == "restart" else max(0, self.seq + int(step))
+        setpoint = ds.channels_to_setpoint(*channels, LIMITS)
+        for _ in range(copies):
+            h.feed(ds.Stick(h.now, h.m.session_id, h.request("stick"), self.seq, setpoint, authorized))
+
+    @rule(stale=st.sampled_from([False, False, False, True]), copies=st.sampled_from([1, 5]))
+    def payload_command(self, stale: bool, copies: int) -> None:
+        h = self.h
+        for _ in range(copies):
+            sid = None if stale else h.m.session_id
+            h.feed(ds.PayloadCommand(h.now, sid, h.request("payload")))
 
     @rule(stale=st.sampled_from([False, False, False, True]))
     def heartbeat(self, stale: bool) -> None:
@@ -475,3 +512,45 @@ def test_shutdown_while_connecting_answers_the_enter() -> None:
     assert h.m.state is ds.State.EXITING
     h.feed(ds.LinkClosed(h.now, min(h.closing)))
     assert h.answers[req] == [314000] and h.answers[queued] == [0] and h.m.state is ds.State.IDLE
+
+
+def test_a_payload_command_is_forwarded_only_while_driving_freely() -> None:
+    h = Harness()
+    sid = _live(h)
+    assert _kinds(h.feed(ds.PayloadCommand(h.now, sid, h.request("payload")))) == ["Forward"]
+    assert _kinds(h.feed(ds.PayloadCommand(h.now, None, h.request("payload")))) == ["Count"]  # no session
+    h.feed(ds.EStop(h.now, sid, h.request("estop")))
+    refused = h.feed(ds.PayloadCommand(h.now, sid, h.request("payload")))
+    assert [(type(a).__name__, getattr(a, "result", None)) for a in refused] == [
+        ("Count", None),
+        ("StickReply", ds.BUSY),
+    ]
+    h.feed(ds.Stick(h.now, sid, h.request("stick"), 0, ds.ZERO))  # seq 0 releases the stop
+    h.now += CFG.heartbeat_timeout + 0.1  # heartbeats overdue: held, refused with 514301
+    held = h.feed(ds.PayloadCommand(h.now, sid, h.request("payload")))
+    assert [a.result for a in held if isinstance(a, ds.StickReply)] == [ds.DRC_HEARTBEAT_TIMEOUT]
+    assert not any(isinstance(a, ds.Forward) for a in held)
+
+
+@given(roll=st.integers(364, 1684), pitch=st.integers(364, 1684), throttle=st.integers(364, 1684),
+       yaw=st.integers(364, 1684))  # fmt: skip
+def test_stick_channels_map_linearly_within_the_limits(
+    roll: int, pitch: int, throttle: int, yaw: int
+) -> None:
+    forward, right, up, yaw_rate = ds.channels_to_setpoint(roll, pitch, throttle, yaw, LIMITS)
+    assert abs(forward) <= LIMITS.horizontal and abs(right) <= LIMITS.horizontal
+    assert -LIMITS.down <= up <= LIMITS.up and abs(yaw_rate) <= LIMITS.yaw_rate
+    # DJI's directions: larger roll right, pitch forward, throttle up, yaw clockwise; 1024 still
+    for value, axis in ((roll, right), (pitch, forward), (throttle, up), (yaw, yaw_rate)):
+        assert (axis > 0) == (value > ds.STICK_NEUTRAL) and (axis < 0) == (value < ds.STICK_NEUTRAL)
+    assert ds.channels_to_setpoint(1024, 1024, 1024, 1024, LIMITS) == ds.ZERO
+    assert ds.channels_to_setpoint(1684, 1684, 1684, 1684, LIMITS) == (10.0, 10.0, 5.0, 90.0)
+    assert ds.channels_to_setpoint(364, 364, 364, 364, LIMITS) == (-10.0, -10.0, -4.0, -90.0)
+
+
+def test_the_session_and_the_contract_agree_on_the_stick_channels() -> None:
+    assert (ds.STICK_NEUTRAL, ds.STICK_NEUTRAL + ds.STICK_SPAN, ds.STICK_NEUTRAL - ds.STICK_SPAN) == (
+        STICK_NEUTRAL,
+        STICK_MAX,
+        STICK_MIN,
+    )
