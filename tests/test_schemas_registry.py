@@ -72,6 +72,17 @@ SEED_METHOD_NAMES = {
     TopicKind.STATUS: {"update_topo"},
 }
 
+#: Newer DRC methods from DJI's Cloud API docs (Dock 2/3, RC Plus 2), beyond seed 003 (docs/cloud-api.md).
+DJI_DOC_METHOD_NAMES: dict[TopicKind, set[str]] = {
+    TopicKind.DRC_DOWN: {"stick_control", "drc_gimbal_reset"},
+    TopicKind.DRC_UP: {
+        "stick_control",
+        "drc_gimbal_reset",
+        "drc_drone_state_push",
+        "drc_batteries_info_push",
+    },
+}
+
 
 def _seed(kind: TopicKind, method: str) -> dict[str, Any]:
     (example,) = [e for e in SEED_003 if e.kind is kind and e.method == method]
@@ -81,7 +92,10 @@ def _seed(kind: TopicKind, method: str) -> dict[str, Any]:
 def test_registry_holds_every_seed_method() -> None:
     registry = default_registry()
     for kind, names in SEED_METHOD_NAMES.items():
-        assert set(registry.methods(kind)) == names
+        assert set(registry.methods(kind)) == names | DJI_DOC_METHOD_NAMES.get(kind, set())
+    for kind in (TopicKind.DRC_DOWN,):
+        for method in DJI_DOC_METHOD_NAMES[kind]:
+            assert registry.spec(kind, method).source.startswith("DJI Cloud API docs § "), method
     assert set(registry.methods(TopicKind.SERVICES_REPLY)) == SEED_METHOD_NAMES[TopicKind.SERVICES]
     assert set(registry.methods(TopicKind.EVENTS_REPLY)) == SEED_METHOD_NAMES[TopicKind.EVENTS]
     assert registry.methods(TopicKind.REQUESTS) == ()
