@@ -430,3 +430,39 @@ def test_a_flood_of_sticks_starves_no_heartbeat_reply_or_device(rig: dict[str, A
     assert frames <= (cfg.max_stick_rate + cfg.stream_hz + 5) * elapsed + 20
     assert gw.app.metrics.count("drc_failsafe_stops_total") == 0
     assert model.yaw.speed in (20.0, 21.0)
+
+
+def test_stick_control_drives_the_gimbal_and_drc_gimbal_reset_resets_it(rig: dict[str, Any]) -> None:
+    """The RC Plus methods on a gateway with only a gimbal (payload authority): stick_control's yaw
+    channel → yaw speed, throttle → pitch speed (× drc_pitch_gain); drc_gimbal_reset is gimbal_reset."""
+    cloud, model, sniffer = rig["cloud"], rig["sim"].model, rig["sniffer"]
+    assert _enter(cloud, rig["drc_broker"])["data"]["result"] == 0
+    drc = DrcClient(rig["drc_broker"].port, DRC_USER, DRC_PASSWORD)
+    try:
+        drc.send("heart_beat", {"timestamp": 1}, seq=1)
+        drc.wait("heart_beat")
+        # half yaw (45 °/s clockwise) and a quarter throttle (1.25 m/s up → 12.5 °/s pitch at gain 10)
+        drc.send("stick_control", {"roll": 1024, "pitch": 1024, "throttle": 1189, "yaw": 1354}, seq=1)
+        wait_until(lambda: model.yaw.speed == 45.0, 3, what="gimbal yaw speed 45")
+        wait_until(lambda: model.pitch.speed == 12.5, 3, what="gimbal pitch speed 12.5")
+        drc.send("stick_control", {"yaw": 364}, seq=2)  # full counter-clockwise, other channels neutral
+        wait_until(lambda: model.yaw.speed == -90.0 and model.pitch.speed == 0.0, 3, what="full left")
+        assert drc.count("stick_control") == 0  # accepted stick_control is not answered
+        drc.send("stick_control", {"yaw": 1700}, seq=3)  # outside 364..1684: refused, never clamped
+        bad = drc.wait("stick_control")["data"]
+        assert bad["result"] == 325001 and "yaw" in bad["output"]["reason"], bad
+        wait_until(lambda: model.yaw.speed == 0.0, 3, what="stopped once the sticks stop")
+
+        recentered = lambda: sum(  # noqa: E731
+            1 for n, f in sniffer.commands if n == "recenter_selfie" and f["recenter_and_selfie_command"] == 1
+        )
+        before = recentered()
+        drc.send("drc_gimbal_reset", {"payload_index": PI, "reset_mode": 0}, seq=4)
+        assert drc.wait("drc_gimbal_reset")["data"] == {"result": 0}
+        assert recentered() == before + 1  # the gimbal_reset service's recenter, once
+        drc.send("drc_gimbal_reset", {"payload_index": "1009-0-0", "reset_mode": 0}, seq=5)
+        unknown = drc.wait("drc_gimbal_reset", lambda d: d["result"] != 0)["data"]
+        assert unknown["result"] == 325001 and unknown["output"]["reason"], unknown
+    finally:
+        drc.close()
+    assert rig["gw"].app.metrics.count("drc_sticks_total") >= 2
