@@ -607,37 +607,32 @@ class DrcController:
             self.heartbeats.append((self.clock.time_ms(), int(request.data.timestamp)))
             self._feed(ds.Heartbeat(now, session, _Down(via, request)))
         elif method == "drone_control":
-            problem = self._authority_problem()
-            self._feed(
-                ds.Stick(
-                    now,
-                    session,
-                    _Down(via, request),
-                    int(request.data.seq),
-                    self._to_body(request.data),
-                    authorized=problem is None,
-                    denied_result=int(problem[0]) if problem is not None else 0,
-                )
-            )
+            self._stick(now, session, _Down(via, request), self._to_body(request.data))
         elif method == "stick_control":
             d = request.data
-            problem = self._authority_problem()
-            self._feed(
-                ds.Stick(
-                    now,
-                    session,
-                    _Down(via, request),
-                    int(request.data.seq),
-                    ds.channels_to_setpoint(d.roll, d.pitch, d.throttle, d.yaw, self._stick_limits),
-                    authorized=problem is None,
-                    denied_result=int(problem[0]) if problem is not None else 0,
-                )
-            )
+            setpoint = ds.channels_to_setpoint(d.roll, d.pitch, d.throttle, d.yaw, self._stick_limits)
+            self._stick(now, session, _Down(via, request), setpoint)
         elif method == "drone_emergency_stop":
             audit("emergency_stop", method=method, source="drc", seq=getattr(request.data, "seq", None))
             self._feed(ds.EStop(now, session, _Down(via, request)))
         elif method == "drc_gimbal_reset":
             self._feed(ds.PayloadCommand(now, session, _Down(via, request)))
+
+    def _stick(self, now: float, session: int | None, token: _Down, setpoint: ds.SetPoint) -> None:
+        """A ``drone_control`` or ``stick_control`` (already in the body frame) into the session, with the
+        control authority as it stands now."""
+        problem = self._authority_problem()
+        self._feed(
+            ds.Stick(
+                now,
+                session,
+                token,
+                int(token.message.data.seq),
+                setpoint,
+                authorized=problem is None,
+                denied_result=int(problem[0]) if problem is not None else 0,
+            )
+        )
 
     def emergency_stop(self) -> None:
         """An emergency stop from the gateway itself (the web console): the session event a drc/down
