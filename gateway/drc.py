@@ -3,7 +3,8 @@
 Owns: the DRC broker link named by ``drc_mode_enter`` (a dedicated paho client, or the main
 connection when it is the same broker), turning ``drc/down`` messages into session events and the
 session's actions into ``drc/up`` replies, ``drc_status_notify`` events, the gateway osd, metrics
-and motion, the pushes (osd/hsi/delay), and the one thread that writes motion frames to devices.
+and motion, the pushes (osd/hsi/delay, aircraft state, battery), ``drc_gimbal_reset`` (run as the
+``gimbal_reset`` service), and the one thread that writes motion frames to devices.
 Must not know: how a decision is made (the session decides: states, seq rules, failsafes, the order
 of session changes), bytes on a device link (adapters encode), or Cloud API routing (dispatcher).
 
@@ -32,7 +33,9 @@ reads ``drone_emergency_stop`` stops every device whatever its ``data``.
 
 Sticks are the seed's: ``x`` lateral (+ left), ``y`` longitudinal (+ forward), ``h`` vertical
 (+ up), ``w`` yaw rate (+ clockwise); ``x_sign``, ``y_sign`` and ``swap_xy`` adapt clouds that
-disagree. Devices receive body-frame forward / right / up velocities and a clockwise yaw rate.
+disagree. ``stick_control`` (DJI's newer docs) sends RC channels instead, mapped by
+``drc_session.channels_to_setpoint``. Devices receive body-frame forward / right / up velocities and a
+clockwise yaw rate.
 """
 
 from __future__ import annotations
@@ -423,6 +426,8 @@ class DrcController:
         if self._push_task is not None:
             self._push_task.cancel()
             self._push_task = None
+        for task in list(self._forwarding):  # a drc_gimbal_reset still waiting for its device
+            task.cancel()
         await asyncio.to_thread(self.writer.stop)
 
     def _resolve(self, future: Any, result: int, reason: str | None) -> None:

@@ -86,7 +86,7 @@ class FlyToPointProgress(OutboundModel):
         default=None, description="Time left at the planned speed (s).", json_schema_extra={"x-unit": "s"}
     )
     planned_path_points: list[PathPoint] | None = Field(
-        default=None, max_length=256, description="The points being flown to, as requested."
+        default=None, description="The points being flown to, as requested (DJI: no size limit)."
     )
 
 

@@ -466,3 +466,12 @@ def test_stick_control_drives_the_gimbal_and_drc_gimbal_reset_resets_it(rig: dic
     finally:
         drc.close()
     assert rig["gw"].app.metrics.count("drc_sticks_total") >= 2
+
+
+def test_both_stick_methods_share_the_rate_budget_read_before_parsing() -> None:
+    from gateway.drc import _STICK
+
+    for method in (b"drone_control", b"stick_control"):
+        assert _STICK.search(b'{"seq": 3, "method" : "' + method + b'", "data": {}}')
+    for method in (b"heart_beat", b"drone_emergency_stop", b"drc_gimbal_reset"):
+        assert not _STICK.search(b'{"method":"' + method + b'","data":{}}')
