@@ -55,6 +55,8 @@ PASSWORD_ENV = "DJIGW_CONSOLE_PASSWORD"
 GATEWAY_ENV = "DJIGW_GATEWAY_SN"
 
 EXIT_OK, EXIT_ERROR_RESULT, EXIT_USAGE, EXIT_TIMEOUT = 0, 1, 2, 3
+#: how long ``send --drc`` waits for the refusal of a method that is not answered when accepted (s)
+SILENT_WAIT = 1.0
 
 #: osd fields shown first (and always, when present) in a device's one-line summary.
 _OSD_FIRST = (
@@ -86,8 +88,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     send.add_argument(
         "--drc",
         action="store_true",
-        help="publish on drc/down instead (heart_beat, drone_control, drone_emergency_stop) and wait for "
-        "the drc/up answer with the same method and seq",
+        help="publish on drc/down instead (heart_beat, drone_control, stick_control, drone_emergency_stop, "
+        "drc_gimbal_reset) and wait for the drc/up answer with the same method and seq (stick_control: "
+        "1 s for a refusal, accepted ones are not answered)",
     )
     send.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the reply (10)")
     send.add_argument(
@@ -389,8 +392,15 @@ def cmd_send(ns: argparse.Namespace) -> int:
     except BrokerError as exc:
         print(f"dji-gateway send: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    from schemas.drc import SILENT_WHEN_ACCEPTED
+
+    silent = ns.drc and ns.method in SILENT_WHEN_ACCEPTED
     try:
         link.publish(request_topic, body, qos=0 if ns.drc else 1)
+        wait = min(ns.timeout, SILENT_WAIT)
+        if silent and not arrived.wait(wait):
+            print(f"sent {ns.method}: not refused within {wait:g}s (an accepted one is not answered)")
+            return EXIT_OK
         if not arrived.wait(ns.timeout):
             print(
                 f"dji-gateway send: no reply to {ns.method} from {gw} within {ns.timeout:g}s; "
@@ -636,7 +646,7 @@ class MonitorState:
             while len(drc.pending_heartbeats) > 64:
                 drc.pending_heartbeats.pop(next(iter(drc.pending_heartbeats)))
             return []
-        if method == "drone_control":
+        if method in ("drone_control", "stick_control"):
             drc.stick, drc.stick_at = dict(data), now
             return [f"{_clock()} drc    sticks {_compact(data)}"]
         if method == "drone_emergency_stop":

@@ -110,6 +110,11 @@ class StickControl(InboundModel):
     )
 
 
+#: drc/down methods a device does not answer when it accepts them (DJI: "this protocol has no reply");
+#: a refusal is answered.
+SILENT_WHEN_ACCEPTED = frozenset({"stick_control"})
+
+
 class DrcGimbalReset(GimbalReset):
     """Reset the gimbal over DRC (DJI Cloud API docs, RC Plus 2 § payload control - reset the gimbal,
     method ``drc_gimbal_reset``): the same ``payload_index`` and ``reset_mode`` as the ``gimbal_reset``
@@ -280,6 +285,7 @@ __all__ = [
     "STICK_MAX",
     "STICK_MIN",
     "STICK_NEUTRAL",
+    "SILENT_WHEN_ACCEPTED",
     "DelayInfoPush",
     "DrcBatteriesInfoPush",
     "DrcDroneStatePush",

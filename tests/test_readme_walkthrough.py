@@ -263,9 +263,11 @@ def _check_what_the_reader_saw(
         pattern = re.compile(rf"osd    {sn} .*\b{field}=(-?[\d.]+)")
         return [float(m.group(1)) for ln in list(view) if (m := pattern.search(ln))]
 
-    # every send got result 0 and printed its reply
+    # every send got result 0 and printed its reply (stick_control: accepted, so not answered)
     for command, done in ran:
-        if command.startswith("dji-gateway send "):
+        if command.startswith("dji-gateway send --drc stick_control "):
+            assert done.stdout.startswith("sent stick_control: not refused"), (command, done.stdout)
+        elif command.startswith("dji-gateway send "):
             assert '"result": 0' in done.stdout or '"seq": 1' in done.stdout, (command, done.stdout)
         if command.startswith("dji-gateway decode "):
             frames = [json.loads(ln) for ln in done.stdout.splitlines()]
