@@ -65,6 +65,7 @@ from gateway.mqtt import MqttBridge
 from gateway.ratelimit import TokenBucket
 from gateway.settings import BrokerSettings, GatewaySettings
 from schemas import ResultCode, TopicKind, echo_heart_beat, error_reply_from_validation, reply_for, topic
+from schemas.drc import SILENT_WHEN_ACCEPTED
 from schemas.registry import Registry
 
 log = logging.getLogger(__name__)
@@ -673,7 +674,7 @@ class DrcController:
                     output["reason"] = action.reason
                 if action.result == 0:
                     self.metrics.inc("drc_sticks_total")
-                    if method == "stick_control":  # DJI: "this protocol has no reply"; refusals are told
+                    if method in SILENT_WHEN_ACCEPTED:  # DJI: "this protocol has no reply"; refusals are told
                         return
             elif action.reason:
                 output = {"reason": action.reason}
