@@ -554,3 +554,28 @@ def test_the_session_and_the_contract_agree_on_the_stick_channels() -> None:
         STICK_MAX,
         STICK_MIN,
     )
+
+
+def test_five_copies_of_enter_and_of_exit_make_one_session_and_one_exit() -> None:
+    """DJI's reference cloud sends each message five times (a new tid each, at worst), the copies
+    racing the link: one link opened, one closed, every copy answered 0, drc_state reported once each."""
+    h = Harness()
+    link = ds.LinkSpec("drc-a", True)
+    reports: list[int] = []
+
+    def feed(event: ds.Event) -> None:
+        reports.extend(a.drc_state for a in h.feed(event) if isinstance(a, ds.Report))
+
+    enters = [h.request("enter") for _ in range(5)]
+    for req in enters:
+        feed(ds.Enter(h.now, req, link))
+    assert len(h.opening) == 1 and not h.answers  # one link being opened; the copies wait their turn
+    feed(ds.LinkUp(h.now, min(h.opening)))
+    assert [h.answers[r] for r in enters] == [[0]] * 5 and reports == [1, 2]
+    exits = [h.request("exit") for _ in range(5)]
+    for req in exits:
+        feed(ds.Exit(h.now, req))
+    assert len(h.closing) == 1 and reports == [1, 2, 0]
+    feed(ds.LinkClosed(h.now, min(h.closing)))
+    assert [h.answers[r] for r in exits] == [[0]] * 5 and reports == [1, 2, 0]
+    assert h.m.state is ds.State.IDLE and not (h.opening or h.open or h.closing)
