@@ -286,6 +286,7 @@ class DrcController:
         #: ``call_local``, set by the app (drc_gimbal_reset is the gimbal_reset service over drc/down)
         self.call_service: Callable[[bytes], Awaitable[bytes]] | None = None
         self._forwarding: set[asyncio.Task[None]] = set()
+        self._forwarded = 0  # drc_gimbal_reset carried out (a tid for one without a seq)
         self.cmd_delay_ms = 0.0
         self.osd_hz = 10
         self.hsi_hz = 1
@@ -689,13 +690,20 @@ class DrcController:
 
     async def _forward(self, token: _Down) -> None:
         """``drc_gimbal_reset`` → the ``gimbal_reset`` service through the dispatcher (validation, routing by
-        ``payload_index``, payload authority, deadline, metrics, audit), answered on drc/up."""
+        ``payload_index``, payload authority, deadline, metrics, audit), answered on drc/up. Copies with
+        the same ``seq`` in one session (clouds repeat DRC messages) share one tid: the dispatcher's
+        duplicate-tid cache gives them one effect and the same answer."""
         request = token.message
         data = request.data.model_dump(mode="json", include={"payload_index", "reset_mode"})
+        seq = request.data.seq
+        self._forwarded += 1
+        tid = f"drc-{request.method}-{self.session.session_id}-" + (
+            f"seq-{seq}" if seq is not None else f"n-{self._forwarded}"
+        )
         result, output = int(ResultCode.INTERNAL_ERROR), {"reason": "no dispatcher to carry it out"}
         if self.call_service is not None:
             body = {
-                "tid": f"drc-{request.method}-{self.clock.time_ms()}",
+                "tid": tid,
                 "bid": "drc",
                 "timestamp": self.clock.time_ms(),
                 "gateway": self.gw,

@@ -457,8 +457,11 @@ def test_stick_control_drives_the_gimbal_and_drc_gimbal_reset_resets_it(rig: dic
             1 for n, f in sniffer.commands if n == "recenter_selfie" and f["recenter_and_selfie_command"] == 1
         )
         before = recentered()
-        drc.send("drc_gimbal_reset", {"payload_index": PI, "reset_mode": 0}, seq=4)
-        assert drc.wait("drc_gimbal_reset")["data"] == {"result": 0}
+        for _ in range(5):  # five copies of one message (one seq): one recenter, five equal answers
+            drc.send("drc_gimbal_reset", {"payload_index": PI, "reset_mode": 0}, seq=4)
+        wait_until(lambda: drc.count("drc_gimbal_reset") == 5, 5, what="five answers")
+        assert drc.count("drc_gimbal_reset", lambda d: d == {"result": 0}) == 5
+        time.sleep(0.3)
         assert recentered() == before + 1  # the gimbal_reset service's recenter, once
         drc.send("drc_gimbal_reset", {"payload_index": "1009-0-0", "reset_mode": 0}, seq=5)
         unknown = drc.wait("drc_gimbal_reset", lambda d: d["result"] != 0)["data"]
