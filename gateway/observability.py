@@ -78,7 +78,7 @@ HELP: dict[str, str] = {
     "topology_published_total": "update_topo messages published",
     "drc_sessions_total": "Live flight control (DRC) sessions entered",
     "drc_heartbeats_total": "DRC heart_beat messages echoed",
-    "drc_sticks_total": "DRC drone_control set-points accepted",
+    "drc_sticks_total": "DRC drone_control and stick_control set-points accepted",
     "drc_rejected_total": "DRC messages refused, by reason",
     "drc_failsafe_stops_total": "Motion stopped by a DRC failsafe, by reason "
     "(sticks, heartbeat, link_lost, emergency_stop, authority)",
