@@ -200,8 +200,9 @@ def reply_for(
     if output is not None:
         body["output"] = output
     cls = message_class(reply_kind(request.kind), method, reply_data)
-    if isinstance(request, DrcDownMessage):
-        return cls.model_validate({"method": method, "data": body})
+    if isinstance(request, DrcDownMessage):  # DJI's drc/up replies repeat the seq beside data
+        beside = {"seq": request.seq} if request.seq is not None else {}
+        return cls.model_validate({"method": method, "data": body, **beside})
     if timestamp is None:
         raise ValueError("timestamp (ms) is required for a thing-topic reply")
     return cls.model_validate(

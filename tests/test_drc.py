@@ -461,6 +461,7 @@ def test_stick_control_drives_the_gimbal_and_drc_gimbal_reset_resets_it(rig: dic
             drc.send("drc_gimbal_reset", {"payload_index": PI, "reset_mode": 0}, seq=4)
         wait_until(lambda: drc.count("drc_gimbal_reset") == 5, 5, what="five answers")
         assert drc.count("drc_gimbal_reset", lambda d: d == {"result": 0}) == 5
+        assert drc.wait("drc_gimbal_reset")["seq"] == 4  # DJI's replies repeat the seq beside data
         time.sleep(0.3)
         assert recentered() == before + 1  # the gimbal_reset service's recenter, once
         drc.send("drc_gimbal_reset", {"payload_index": "1009-0-0", "reset_mode": 0}, seq=5)
