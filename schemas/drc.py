@@ -282,10 +282,10 @@ class DrcBatteriesInfoPush(Battery):
 
 
 __all__ = [
+    "SILENT_WHEN_ACCEPTED",
     "STICK_MAX",
     "STICK_MIN",
     "STICK_NEUTRAL",
-    "SILENT_WHEN_ACCEPTED",
     "DelayInfoPush",
     "DrcBatteriesInfoPush",
     "DrcDroneStatePush",
