@@ -14,14 +14,8 @@ import logging
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from adapters import families
 from adapters.base import Adapter
-from adapters.osdk.adapter import AircraftAdapter
-from adapters.osdk.extensions import EXTENSIONS as OSDK_EXTENSIONS
-from adapters.robomaster.adapter import RobotAdapter
-from adapters.robomaster.extensions import EVENT_EXTENSIONS as ROBOMASTER_EVENT_EXTENSIONS
-from adapters.robomaster.extensions import EXTENSIONS as ROBOMASTER_EXTENSIONS
-from adapters.rsdk.adapter import GimbalAdapter
-from adapters.rsdk.extensions import EXTENSIONS as RSDK_EXTENSIONS
 from gateway import logcontext
 from gateway.clock import Clock, SystemClock
 from gateway.devices import DeviceTable
@@ -42,33 +36,20 @@ __all__ = ["GatewayApp", "build_adapters", "build_registry"]
 
 
 def build_adapters(settings: GatewaySettings) -> list[Adapter]:
-    adapters: list[Adapter] = []
-    for device in settings.devices:
-        if device.type == "rsdk":
-            adapters.append(GimbalAdapter(device))
-        elif device.type == "osdk":
-            adapters.append(AircraftAdapter(device))
-        elif device.type == "robomaster":
-            adapters.append(RobotAdapter(device))
-        else:  # pragma: no cover - the settings union admits only known types
-            raise ValueError(f"unknown device type {device.type!r}")
-    return adapters
-
-
-#: Every device family's extension services: (method, request model, reply model, summary).
-EXTENSIONS = (*RSDK_EXTENSIONS, *OSDK_EXTENSIONS, *ROBOMASTER_EXTENSIONS)
-#: Every device family's extension events: (method, event data model, events_reply model, summary).
-EVENT_EXTENSIONS = (*ROBOMASTER_EVENT_EXTENSIONS,)
+    """One adapter per ``[[devices]]`` entry, built by the family its ``type`` names."""
+    return [families.get(device.type).build(device) for device in settings.devices]
 
 
 def build_registry() -> Registry:
-    """The seed's methods plus every device family's extension methods (the documented contract;
-    a method whose device is not configured is answered 399001)."""
+    """The seed's methods plus every registered device family's extension methods (the documented
+    contract; a method whose device is not configured is answered 399001)."""
     registry = default_registry()
-    for method, data, reply, summary in EXTENSIONS:
-        registry.register(TopicKind.SERVICES, method, data, reply, summary=summary)
-    for method, data, reply, summary in EVENT_EXTENSIONS:
-        registry.register(TopicKind.EVENTS, method, data, reply, summary=summary)
+    for family in families.all_families():
+        for method, data, reply, summary in family.service_extensions():
+            registry.register(TopicKind.SERVICES, method, data, reply, summary=summary)
+    for family in families.all_families():
+        for method, data, reply, summary in family.event_extensions():
+            registry.register(TopicKind.EVENTS, method, data, reply, summary=summary)
     return registry
 
 

@@ -1,13 +1,13 @@
 """``dji-gateway decode`` / ``encode``: the byte-level tools an integrator debugs a link with.
 
-Owns argument parsing of hex and ``field=value`` input and JSON-lines output; every protocol detail
-comes from ``adapters/<family>/describe.py``. Must not know any frame layout itself.
+Owns argument parsing of hex and ``field=value`` input and JSON-lines output; the families and their
+options come from the registry (:mod:`adapters.families`), every protocol detail from each family's
+describe module. Must not know any family or frame layout itself.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import math
 import sys
@@ -15,11 +15,14 @@ from collections.abc import Iterable, Sequence
 from types import ModuleType
 from typing import Any, TextIO
 
-FAMILIES = ("rsdk", "robomaster", "osdk")
+from adapters import families
 
 
 def _describe(family: str) -> ModuleType:
-    return importlib.import_module(f"adapters.{family}.describe")
+    module = families.get(family).describe_module()
+    if module is None:
+        raise ValueError(f"family {family!r} has no describe module")
+    return module
 
 
 def _hex_to_bytes(chunks: Iterable[str]) -> bytes:
@@ -40,15 +43,18 @@ def _looks_like_candump(text: str) -> bool:
     return "#" in text or "[" in text
 
 
+def _cli_options() -> list[families.CliOption]:
+    """Every registered family's decode/encode options, each flag once."""
+    seen: dict[str, families.CliOption] = {}
+    for family in families.all_families():
+        for option in family.cli_options:
+            seen.setdefault(option.flag, option)
+    return list(seen.values())
+
+
 def _options(ns: argparse.Namespace) -> dict[str, Any]:
-    opts: dict[str, Any] = {}
-    if getattr(ns, "season", None):
-        opts["season"] = ns.season
-    if getattr(ns, "firmware", None):
-        opts["firmware"] = ns.firmware
-    if getattr(ns, "control_cmd_id", None) is not None:
-        opts["control_cmd_id"] = ns.control_cmd_id
-    return opts
+    values = ((o.option, getattr(ns, o.option, None)) for o in _cli_options())
+    return {name: value for name, value in values if value is not None}
 
 
 def json_safe(value: Any) -> Any:
@@ -65,7 +71,7 @@ def json_safe(value: Any) -> Any:
 def run_decode(ns: argparse.Namespace, stdin: TextIO, stdout: TextIO) -> int:
     mod = _describe(ns.protocol)
     text = _read_input(ns.hex, stdin)
-    if ns.protocol == "rsdk" and _looks_like_candump(text):
+    if hasattr(mod, "decode_can_lines") and _looks_like_candump(text):
         records = mod.decode_can_lines(text)
     else:
         try:
@@ -103,7 +109,7 @@ def run_encode(ns: argparse.Namespace, stdout: TextIO, stderr: TextIO) -> int:
     mod = _describe(ns.protocol)
     try:
         fields = parse_assignments(ns.fields)
-        if ns.protocol == "rsdk" and ns.can:
+        if ns.can and hasattr(mod, "encode_can"):  # --can is for a CAN family (rsdk); others: one frame
             for arb_id, payload in mod.encode_can(ns.command, ns.seq, fields, **_options(ns)):
                 print(f"{arb_id:03X}#{payload.hex().upper()}", file=stdout)
             return 0
@@ -130,13 +136,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help="decode frames from hex (arguments or stdin) into JSON lines",
         description="Decode hex (or, for rsdk, candump lines) into one JSON object per frame.",
     )
-    dec.add_argument("protocol", choices=FAMILIES)
+    dec.add_argument("protocol", choices=families.names())
     dec.add_argument("hex", nargs="*", help="hex bytes; '-' or nothing reads stdin")
     _family_options(dec)
     dec.set_defaults(handler=lambda ns: run_decode(ns, sys.stdin, sys.stdout), trailing=("hex", _is_hex_word))
 
     enc = sub.add_parser("encode", help="encode one command as a frame (hex)")
-    enc.add_argument("protocol", choices=FAMILIES)
+    enc.add_argument("protocol", choices=families.names())
     enc.add_argument("command", help="command name from the protocol's table")
     enc.add_argument("--seq", type=lambda s: int(s, 0), default=0)
     enc.add_argument("--can", action="store_true", help="rsdk: print the CAN split as ID#DATA lines")
@@ -148,11 +154,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 
 def _family_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--season", choices=("2024", "2025", "2026"), help="robomaster: referee protocol season")
-    p.add_argument("--firmware", choices=("new", "m100"), help="osdk: flight controller generation")
-    p.add_argument(
-        "--control-cmd-id",
-        type=lambda s: int(s, 0),
-        default=None,
-        help="robomaster: team-defined control cmd_id",
-    )
+    for option in _cli_options():
+        p.add_argument(
+            option.flag,
+            dest=option.option,
+            choices=option.choices,
+            type=(lambda text: int(text, 0)) if option.integer else None,
+            default=None,
+            help=option.help,
+        )

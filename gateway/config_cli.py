@@ -176,10 +176,9 @@ def _rows(model: type[BaseModel], prefix: str, note_prefix: str, instance: BaseM
 
 
 def _device_models() -> list[type[BaseModel]]:
-    from gateway.settings import DeviceSettings
+    from adapters import families
 
-    union = typing.get_args(DeviceSettings)[0]
-    return list(typing.get_args(union))
+    return list(families.settings_models())
 
 
 def reference_markdown() -> str:

@@ -16,21 +16,32 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from adapters import families
+from adapters.families import InProcessSim
 from gateway.settings import ConfigError, GatewaySettings, load_settings
 
 log = logging.getLogger(__name__)
 
-#: Serial numbers and payload index of the simulated devices behind ``--simulate`` (documented in the README).
+#: The gateway serial number behind ``--simulate`` (documented in the README).
 SIM_GATEWAY_SN = "DJIGW-SIM-0001"
-SIM_GIMBAL_SN = "RSDK-SIM-0001"
-SIM_GIMBAL_PAYLOAD_INDEX = "1001-0-0"
-SIM_ROBOT_SN = "RM-SIM-0001"
-SIM_ROBOT_PAYLOAD_INDEX = "1002-0-0"  # the simulated robot's gimbal (camera_screen_drag, gimbal_reset)
+
+
+def _tour(family: str, key: str) -> str:
+    """A field of the device entry ``--simulate`` adds for ``family`` (``Family.tour``)."""
+    return str((families.get(family).tour or {})[key])
+
+
+#: The simulated devices' serial numbers and payload indexes (documented in the README; ``make run`` prints
+#: them), as the families' tour entries give them.
+SIM_GIMBAL_SN = _tour("rsdk", "sn")
+SIM_GIMBAL_PAYLOAD_INDEX = _tour("rsdk", "payload_index")
+SIM_ROBOT_SN = _tour("robomaster", "sn")
+SIM_ROBOT_PAYLOAD_INDEX = _tour("robomaster", "payload_index")  # the robot's gimbal (camera_screen_drag …)
 #: Placeholder url of the simulated robot; ``_run`` replaces it with its in-process simulator's socket:// url.
-SIM_ROBOT_URL = "sim://robomaster"
-SIM_AIRCRAFT_SN = "OSDK-SIM-0001"
+SIM_ROBOT_URL = _tour("robomaster", "url")
+SIM_AIRCRAFT_SN = _tour("osdk", "sn")
 #: Placeholder url of the simulated aircraft; ``_run`` replaces it with its simulator's socket:// url.
-SIM_AIRCRAFT_URL = "sim://osdk"
+SIM_AIRCRAFT_URL = _tour("osdk", "url")
 
 
 def setup_logging(level: str, as_json: bool) -> None:
@@ -45,29 +56,12 @@ def setup_logging(level: str, as_json: bool) -> None:
 
 
 def simulated_settings(base: dict[str, Any]) -> dict[str, Any]:
-    """Add the in-process simulators' devices (virtual CAN bus) to a settings document."""
+    """Add every registered family's tour device (:attr:`adapters.families.Family.tour`) to a settings
+    document: the devices ``start_simulators`` then simulates in-process."""
     doc = dict(base)
     doc.setdefault("gateway_sn", SIM_GATEWAY_SN)
     devices = list(doc.get("devices", []))
-    devices.append(
-        {
-            "type": "rsdk",
-            "sn": SIM_GIMBAL_SN,
-            "payload_index": SIM_GIMBAL_PAYLOAD_INDEX,
-            "interface": "virtual",
-            "channel": f"djigw-sim-{SIM_GIMBAL_SN}",
-            "drc_drive": True,  # live-control sticks turn it (with payload authority): docs/drc.md
-        }
-    )
-    devices.append(
-        {
-            "type": "robomaster",
-            "sn": SIM_ROBOT_SN,
-            "payload_index": SIM_ROBOT_PAYLOAD_INDEX,
-            "url": SIM_ROBOT_URL,
-        }
-    )
-    devices.append({"type": "osdk", "sn": SIM_AIRCRAFT_SN, "url": SIM_AIRCRAFT_URL})
+    devices += [dict(family.tour) for family in families.all_families() if family.tour is not None]
     doc["devices"] = devices
     return doc
 
@@ -93,7 +87,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     run.set_defaults(handler=cmd_run)
 
     sim = sub.add_parser("simulate", help="run one device simulator as its own process")
-    sim.add_argument("device", choices=("rsdk", "robomaster", "osdk"))
+    sim.add_argument("device", choices=families.names())
     sim.add_argument("args", nargs=argparse.REMAINDER, help="simulator options (see: simulate rsdk --help)")
     sim.set_defaults(handler=cmd_simulate)
 
@@ -154,18 +148,9 @@ def cmd_run(ns: argparse.Namespace) -> int:
 async def _run(settings: GatewaySettings, *, simulate: bool) -> int:
     from gateway.app import GatewayApp
 
-    sims: list[Any] = []
+    sims: list[InProcessSim] = []
     if simulate:
-        from adapters.rsdk.sim import GimbalCanSim
-
-        for d in settings.devices:
-            if d.type == "rsdk" and d.interface == "virtual":
-                sims.append(GimbalCanSim(interface="virtual", channel=d.channel).start())
-                log.info(
-                    "simulated gimbal %s (payload %s) on virtual CAN %s", d.sn, d.payload_index, d.channel
-                )
-        settings = _simulate_robots(settings, sims)
-        settings = _simulate_aircraft(settings, sims)
+        settings = start_simulators(settings, sims)
     app = GatewayApp(settings)
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -179,59 +164,30 @@ async def _run(settings: GatewaySettings, *, simulate: bool) -> int:
     return 0
 
 
-def _simulate_robots(settings: GatewaySettings, sims: list[Any]) -> GatewaySettings:
-    """Start a referee + main board simulator on a loopback TCP port for every robot whose url is
-    ``SIM_ROBOT_URL``, and point the robot's url at it."""
-    import time
-
-    from adapters.robomaster.sim import RefereeMatch, RobomasterSim
-    from adapters.simio import TcpEndpoint
-
+def start_simulators(settings: GatewaySettings, sims: list[InProcessSim]) -> GatewaySettings:
+    """Start, for every device entry its family's simulator module takes (``in_process``: a gimbal on
+    a virtual CAN bus, a robot or an aircraft whose url is its ``sim://`` placeholder), a simulator in
+    this process, appended to ``sims``; the settings returned point those entries at them."""
     devices = []
-    for d in settings.devices:
-        if d.type == "robomaster" and d.url == SIM_ROBOT_URL:
-            match = RefereeMatch(season=d.season, unix_offset=time.time() - time.monotonic())
-            endpoint = TcpEndpoint(RobomasterSim(match, control=d.control.channel())).start()
-            sims.append(endpoint)
-            d = d.model_copy(update={"url": endpoint.url})
-            log.info("simulated robot %s (season %s) at %s", d.sn, d.season, endpoint.url)
-        devices.append(d)
-    return settings.model_copy(update={"devices": devices})
-
-
-def _simulate_aircraft(settings: GatewaySettings, sims: list[Any]) -> GatewaySettings:
-    """Start an Onboard SDK flight-controller simulator on a loopback TCP port for every aircraft
-    whose url is ``SIM_AIRCRAFT_URL``, and point the aircraft's url at it."""
-    from adapters.osdk.sim import OsdkFcDevice, OsdkFcModel
-    from adapters.simio import TcpEndpoint
-
-    devices = []
-    for d in settings.devices:
-        if d.type == "osdk" and d.url == SIM_AIRCRAFT_URL:
-            # the simulated flight controller speaks the firmware the device entry says (new or m100)
-            endpoint = TcpEndpoint(OsdkFcDevice(OsdkFcModel(firmware=d.firmware))).start()
-            sims.append(endpoint)
-            d = d.model_copy(update={"url": endpoint.url})
-            log.info("simulated aircraft %s at %s", d.sn, endpoint.url)
-        devices.append(d)
+    for device in settings.devices:
+        module = families.get(device.type).simulator_module()
+        in_process = getattr(module, "in_process", None)
+        started = in_process(device) if in_process is not None else None
+        if started is not None:
+            sim, device = started
+            sims.append(sim)
+        devices.append(device)
     return settings.model_copy(update={"devices": devices})
 
 
 def cmd_simulate(ns: argparse.Namespace) -> int:
     setup_logging("INFO", False)
-    if ns.device == "rsdk":
-        from adapters.rsdk import sim
-
-        return sim.main(ns.args)
-    if ns.device == "osdk":
-        from adapters.osdk import sim as osdk_sim
-
-        return osdk_sim.main(ns.args)
-    if ns.device == "robomaster":
-        from adapters.robomaster import sim as robomaster_sim
-
-        return robomaster_sim.main(ns.args)
-    return 2  # pragma: no cover - argparse restricts the choices
+    module = families.get(ns.device).simulator_module()
+    if module is None:
+        print(f"dji-gateway: family {ns.device} has no simulator", file=sys.stderr)
+        return 2
+    result: int = module.main(ns.args)
+    return result
 
 
 def main(argv: Sequence[str] | None = None) -> int:  # pragma: no cover - thin alias for python -m

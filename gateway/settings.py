@@ -11,24 +11,24 @@ import ipaddress
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Union
 from urllib.parse import urlsplit
 
 from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    PlainValidator,
     SecretStr,
+    TypeAdapter,
     ValidationError,
     field_validator,
     model_validator,
 )
 from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
 
+from adapters import families
 from adapters.config import ProductSettings
-from adapters.osdk.config import OsdkDeviceSettings
-from adapters.robomaster.config import RobomasterDeviceSettings
-from adapters.rsdk.config import RsdkDeviceSettings
 from schemas.status import MAX_SUB_DEVICES
 
 __all__ = [
@@ -36,12 +36,12 @@ __all__ = [
     "BrokerSettings",
     "ConfigError",
     "ConsoleSettings",
+    "DeviceSettings",
     "DispatcherSettings",
     "DrcSettings",
     "GatewaySettings",
     "MetricsSettings",
     "ProductSettings",
-    "RsdkDeviceSettings",
     "load_settings",
 ]
 
@@ -318,9 +318,26 @@ class ConsoleSettings(BaseModel):
         return self
 
 
-DeviceSettings = Annotated[
-    RsdkDeviceSettings | OsdkDeviceSettings | RobomasterDeviceSettings, Field(discriminator="type")
-]
+_device_unions: dict[tuple[type[BaseModel], ...], TypeAdapter[Any]] = {}
+
+
+def _device(value: Any) -> BaseModel:
+    """One ``[[devices]]`` entry, validated by the model of the family its ``type`` names: a union
+    discriminated on ``type`` over every family registered now (:mod:`adapters.families`), so a family
+    registered after this module was imported is accepted too. Errors keep the union's locations
+    (``devices.0.rsdk.bitrate``)."""
+    models = families.settings_models()
+    union = _device_unions.get(models)
+    if union is None:
+        union = _device_unions[models] = TypeAdapter(
+            Annotated[Union[models], Field(discriminator="type")]  # noqa: UP007 - built from a tuple
+        )
+    device: BaseModel = union.validate_python(value)
+    return device
+
+
+#: One ``[[devices]]`` entry: the settings model of one registered device family (discriminated on ``type``).
+DeviceSettings = Annotated[Any, PlainValidator(_device)]
 
 
 class GatewaySettings(BaseSettings):

@@ -22,7 +22,7 @@ from adapters.robomaster.config import RobomasterDeviceSettings
 from adapters.robomaster.sim import RefereeMatch, RobomasterSim, Stages
 from adapters.simio import PtyEndpoint
 from gateway.local_broker import LocalBroker
-from gateway.run_cli import SIM_ROBOT_SN, SIM_ROBOT_URL, _simulate_robots, simulated_settings
+from gateway.run_cli import SIM_ROBOT_SN, SIM_ROBOT_URL, simulated_settings, start_simulators
 from gateway.settings import ConfigError, load_settings
 from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
 
@@ -297,7 +297,7 @@ def test_simulated_robot_of_run_simulate(broker: LocalBroker) -> None:
     doc = simulated_settings({"broker": {"url": f"mqtt://127.0.0.1:{broker.port}"}, "osd_period": 0.2})
     doc["devices"] = [d for d in doc["devices"] if d["type"] == "robomaster"]
     sims: list[Any] = []
-    settings = _simulate_robots(load_settings(None, **doc), sims)
+    settings = start_simulators(load_settings(None, **doc), sims)
     cloud = CloudClient(broker.host, broker.port, settings.gateway_sn)
     gw = GatewayThread(settings)
     try:

@@ -163,3 +163,19 @@ def encode_command(command: str, seq: int, fields: dict[str, Any], **options: An
     payload = encode_request(command, _from_hex(spec.request[0], fields), firmware)
     session = int(options.get("session", int(spec.session)))
     return protocol.encode_command(spec.cmd_set, spec.cmd_id, payload, session, seq)
+
+
+# -- the console's frame inspector (gateway/web/frames.py) -------------------------------------------
+#: the decode option naming the command an ACK answers, and the record key that marks an ACK
+REPLY_OPTION = "ack_command"
+REPLY_FLAG = "is_ack"
+
+
+def frame_rules(options: Mapping[str, Any]) -> protocol.FrameRules:
+    """How the inspector cuts a serial link's bytes into open-protocol frames."""
+    return protocol.FrameRules()
+
+
+def options_for(settings: Any) -> dict[str, Any]:
+    """The decode options that match a configured aircraft: its flight controller's firmware."""
+    return {"firmware": settings.firmware}

@@ -68,6 +68,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
+from adapters.families import InProcessSim
 from adapters.osdk import commands as cmds
 from adapters.osdk import subscription as sub
 from adapters.osdk.commands import (
@@ -1597,3 +1598,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         stop.wait()
     runner.stop()
     return 0
+
+
+#: The ``url`` of an aircraft entry that ``dji-gateway run --simulate`` replaces with its simulator's.
+SIM_URL = "sim://osdk"
+
+
+def in_process(device: Any) -> tuple[InProcessSim, Any] | None:
+    """``dji-gateway run --simulate`` (:mod:`adapters.families`): an aircraft entry whose url is
+    :data:`SIM_URL` gets a flight-controller simulator on a loopback TCP port, speaking the firmware the
+    entry names (new or m100), and the entry pointed at it. Any other entry: None."""
+    if device.url != SIM_URL:
+        return None
+    endpoint = TcpEndpoint(OsdkFcDevice(OsdkFcModel(firmware=device.firmware))).start()
+    log.info("simulated aircraft %s at %s", device.sn, endpoint.url)
+    return endpoint, device.model_copy(update={"url": endpoint.url})

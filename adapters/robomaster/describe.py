@@ -25,7 +25,7 @@ from adapters.robomaster.commands import (
     decode_message,
     encode_message,
 )
-from adapters.robomaster.protocol import DEFAULT_MAX_DATA_LEN, BadFrame, Decoder, Frame
+from adapters.robomaster.protocol import DEFAULT_MAX_DATA_LEN, BadFrame, Decoder, Frame, FrameRules
 from adapters.wire.describe_util import check_options, jsonable
 
 __all__ = ["COMMANDS", "OPTIONS", "decode_bytes", "encode_command"]
@@ -119,3 +119,22 @@ def encode_command(command: str, seq: int, fields: dict[str, Any], **options: An
     if command not in COMMAND_NAMES:
         raise ValueError(f"unknown command {command!r}; valid: {', '.join(COMMANDS)}")
     return encode_message(command, fields, season, seq, control)
+
+
+# -- the console's frame inspector (gateway/web/frames.py) -------------------------------------------
+def frame_rules(options: Mapping[str, Any]) -> FrameRules:
+    """How the inspector cuts a serial link's bytes into frames (bounded by ``max_data_len``)."""
+    return FrameRules(int(options.get("max_data_len", DEFAULT_MAX_DATA_LEN)))
+
+
+def options_for(settings: Any) -> dict[str, Any]:
+    """The decode options that match a configured robot: its season, decoder bound and control channel."""
+    control = settings.control
+    return {
+        "season": settings.season,
+        "max_data_len": settings.max_data_len,
+        "control_cmd_id": control.cmd_id,
+        "control_data_cmd_id": control.data_cmd_id,
+        "control_sender_id": control.sender_id,
+        "control_receiver_id": control.receiver_id,
+    }

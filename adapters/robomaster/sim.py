@@ -37,6 +37,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from adapters.families import InProcessSim
 from adapters.robomaster.commands import (
     DEFAULT_CONTROL,
     DEFAULT_SEASON,
@@ -494,3 +495,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         stop.wait()
     runner.stop()
     return 0
+
+
+#: The ``url`` of a robot entry that ``dji-gateway run --simulate`` replaces with its simulator's.
+SIM_URL = "sim://robomaster"
+
+
+def in_process(device: Any) -> tuple[InProcessSim, Any] | None:
+    """``dji-gateway run --simulate`` (:mod:`adapters.families`): a robot entry whose url is
+    :data:`SIM_URL` gets a referee + main board simulator on a loopback TCP port (the entry's season and
+    control channel), and the entry pointed at it. Any other entry: None."""
+    if device.url != SIM_URL:
+        return None
+    match = RefereeMatch(season=device.season, unix_offset=time.time() - time.monotonic())
+    endpoint = TcpEndpoint(RobomasterSim(match, control=device.control.channel())).start()
+    log.info("simulated robot %s (season %s) at %s", device.sn, device.season, endpoint.url)
+    return endpoint, device.model_copy(update={"url": endpoint.url})

@@ -8,13 +8,13 @@ whose command is not in the input. Must not know MQTT, the gateway or any bus li
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from adapters.rsdk import commands as cmds
 from adapters.rsdk.can import GIMBAL_TX_ID, HOST_TX_ID, Reassembler, segment
 from adapters.rsdk.candump import parse_lines
-from adapters.rsdk.protocol import BadFrame, Decoder, Frame
+from adapters.rsdk.protocol import BadFrame, Decoder, Frame, FrameRules
 from adapters.wire.describe_util import check_options, jsonable
 
 __all__ = ["COMMANDS", "decode_bytes", "decode_can_lines", "encode_can", "encode_command"]
@@ -150,3 +150,19 @@ def encode_can(command: str, seq: int, fields: dict[str, Any], **options: Any) -
     rest = {k: v for k, v in options.items() if k != "arb_id"}
     default_id = GIMBAL_TX_ID if options.get("reply") else HOST_TX_ID
     return segment(encode_command(command, seq, fields, **rest), int(options.get("arb_id", default_id)))
+
+
+# -- the console's frame inspector (gateway/web/frames.py) -------------------------------------------
+#: the decode option naming the command a reply answers, and the record key that marks a reply
+REPLY_OPTION = "reply_to"
+REPLY_FLAG = "is_reply"
+
+
+def frame_rules(options: Mapping[str, Any]) -> FrameRules:
+    """How the inspector cuts one CAN id's reassembled bytes into R SDK frames."""
+    return FrameRules()
+
+
+def options_for(settings: Any) -> dict[str, Any]:
+    """The decode options that match a configured gimbal: none (the inspector keeps ids apart)."""
+    return {}

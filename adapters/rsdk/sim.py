@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from adapters.families import InProcessSim
 from adapters.rsdk.can import GIMBAL_TX_ID, HOST_TX_ID, Reassembler, segment
 from adapters.rsdk.commands import CommandError, build_frame, decode_message
 from adapters.rsdk.protocol import Frame, encode
@@ -530,3 +531,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         stop.wait()
     runner.stop()
     return 0
+
+
+def in_process(device: Any) -> tuple[InProcessSim, Any] | None:
+    """``dji-gateway run --simulate`` (:mod:`adapters.families`): a gimbal entry on a ``virtual`` CAN
+    interface gets a simulator on its channel; the entry is unchanged. Any other entry: None."""
+    if device.interface != "virtual":
+        return None
+    sim = GimbalCanSim(interface="virtual", channel=device.channel).start()
+    log.info(
+        "simulated gimbal %s (payload %s) on virtual CAN %s", device.sn, device.payload_index, device.channel
+    )
+    return sim, device

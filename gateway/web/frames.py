@@ -4,7 +4,8 @@ Owns :class:`FrameTap`, the observer a link calls from its threads for every CAN
 it receives and every one it sends (one ``deque.append``: thread-safe, O(1), bounded); and
 :class:`LinkInspector`, which turns a tap's records into protocol frames (each direction, and on CAN each
 id, is one byte stream cut by the family's own :class:`~adapters.wire.stream.FrameRules`) and describes
-each frame with ``adapters/<family>/describe.py`` — the code behind ``dji-gateway decode``, so the page
+each frame with the family's describe module (:mod:`adapters.families`: ``frame_rules``, ``options_for``,
+``REPLY_OPTION``/``REPLY_FLAG``) — the code behind ``dji-gateway decode``, so the page
 and the command line never disagree. A reply is described against the command with the same seq sent
 before it (``reply_to`` / ``ack_command``), as the CLI does within one input. Downloads: a candump log of
 the CAN frames (``dji-gateway decode rsdk`` reads it back) or one frame per line as hex (serial).
@@ -22,57 +23,32 @@ describe modules know them).
 
 from __future__ import annotations
 
-import importlib
 import itertools
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping
+from types import ModuleType
 from typing import Any
 
+from adapters import families
 from adapters.wire.stream import BadFrame, FrameRules, StreamDecoder
 from gateway.codec_cli import json_safe
 
-__all__ = ["FAMILIES", "FrameTap", "LinkInspector", "Record"]
+__all__ = ["FrameTap", "LinkInspector", "Record", "inspectable"]
 
 #: one tap record: (running number, wall time s, "rx" | "tx", CAN id or None, bytes)
 Record = tuple[int, float, str, int | None, bytes]
 
 
-def _rsdk_rules(options: Mapping[str, Any]) -> FrameRules[Any]:
-    from adapters.rsdk.protocol import FrameRules as RsdkRules
-
-    return RsdkRules()
-
-
-def _osdk_rules(options: Mapping[str, Any]) -> FrameRules[Any]:
-    from adapters.osdk.protocol import FrameRules as OsdkRules
-
-    return OsdkRules()
-
-
-def _robomaster_rules(options: Mapping[str, Any]) -> FrameRules[Any]:
-    from adapters.robomaster.protocol import DEFAULT_MAX_DATA_LEN
-    from adapters.robomaster.protocol import FrameRules as RobomasterRules
-
-    return RobomasterRules(int(options.get("max_data_len", DEFAULT_MAX_DATA_LEN)))
-
-
-@dataclass(frozen=True, slots=True)
-class Family:
-    """How a family's frames are cut from a stream and which describe option names a reply's command."""
-
-    rules: Callable[[Mapping[str, Any]], FrameRules[Any]]
-    reply_option: str | None  # describe option naming the command a reply answers
-    reply_flag: str | None  # the describe record's key that marks a reply
-
-
-FAMILIES: dict[str, Family] = {
-    "rsdk": Family(_rsdk_rules, "reply_to", "is_reply"),
-    "osdk": Family(_osdk_rules, "ack_command", "is_ack"),
-    "robomaster": Family(_robomaster_rules, None, None),
-}
+def inspectable(family: str) -> ModuleType | None:
+    """The describe module of a registered family whose links the inspector can cut into frames (it
+    has ``frame_rules``), or None."""
+    try:
+        module = families.get(family).describe_module()
+    except families.UnknownFamily:
+        return None
+    return module if module is not None and hasattr(module, "frame_rules") else None
 
 
 class FrameTap:
@@ -119,7 +95,8 @@ class LinkInspector:
     def __init__(
         self, *, family: str, kind: str, where: str, keep: int, options: Mapping[str, Any] | None = None
     ) -> None:
-        if family not in FAMILIES:
+        describe = inspectable(family)
+        if describe is None:
             raise ValueError(f"no frame inspector for family {family!r}")
         self.family, self.kind, self.where = family, kind, where
         self.options = dict(options or {})
@@ -128,8 +105,10 @@ class LinkInspector:
         self.gaps = 0  # times records were lost before they were read (the streams restarted)
         self.skipped = 0  # records a live view skipped to catch up with a flood (the downloads keep them)
         self._restarted: set[str] = set()  # directions whose stream restarted after a gap
-        self._spec = FAMILIES[family]
-        self._describe = importlib.import_module(f"adapters.{family}.describe")
+        self._describe = describe
+        #: the describe option naming the command a reply answers, and the record key marking a reply
+        self._reply_option: str | None = getattr(describe, "REPLY_OPTION", None)
+        self._reply_flag: str | None = getattr(describe, "REPLY_FLAG", None)
         self._streams: dict[tuple[str, int | None], StreamDecoder[bytes]] = {}
         self._sent: dict[Any, str] = {}  # seq of a command sent -> its name (replies are described by it)
         self._last = -1  # the last tap record read (the tap numbers them from 0)
@@ -156,7 +135,7 @@ class LinkInspector:
                 self._last = n
                 stream = self._streams.get((direction, can_id))
                 if stream is None:
-                    rules = _RawRules(self._spec.rules(self.options))
+                    rules = _RawRules(self._describe.frame_rules(self.options))
                     stream = self._streams[(direction, can_id)] = StreamDecoder(rules)
                 for item in stream.feed(data):
                     if direction in self._restarted and isinstance(item, BadFrame):
@@ -189,15 +168,15 @@ class LinkInspector:
             }
         options = self.options
         record = self._describe.decode_bytes(item, **options)[0]
-        spec = self._spec
-        if spec.reply_flag is not None and spec.reply_option is not None:
+        flag, option = self._reply_flag, self._reply_option
+        if flag is not None and option is not None:
             key = record.get("seq")
-            if direction == "tx" and not record.get(spec.reply_flag) and record.get("command"):
+            if direction == "tx" and not record.get(flag) and record.get("command"):
                 self._sent[key] = str(record["command"])
                 if len(self._sent) > 512:
                     self._sent.pop(next(iter(self._sent)))
-            elif direction == "rx" and record.get(spec.reply_flag) and key in self._sent:
-                answered = {**options, spec.reply_option: self._sent[key]}
+            elif direction == "rx" and record.get(flag) and key in self._sent:
+                answered = {**options, option: self._sent[key]}
                 record = self._describe.decode_bytes(item, **answered)[0]
         record = dict(json_safe(record))
         record["hex"] = item.hex()

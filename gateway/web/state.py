@@ -24,7 +24,7 @@ from typing import Any
 
 from adapters.base import Adapter
 from gateway.observability import VERSION, link_stats, safe_url
-from gateway.web.frames import FAMILIES, LinkInspector
+from gateway.web.frames import LinkInspector, inspectable
 from gateway.web.journal import Journal
 
 __all__ = ["ConsoleState"]
@@ -77,14 +77,16 @@ class ConsoleState:
             settings = getattr(adapter, "settings", None)
             family = str(getattr(settings, "type", ""))
             stats = link_stats(adapter)
-            if family not in FAMILIES or stats is None:
+            describe = inspectable(family)
+            if describe is None or stats is None:
                 return None
+            options_for = getattr(describe, "options_for", None)
             inspector = LinkInspector(
                 family=family,
                 kind=stats.kind,
                 where=stats.where,
                 keep=self._keep_frames,
-                options=_describe_options(family, settings),
+                options=options_for(settings) if options_for is not None else {},
             )
             self.inspectors[sn] = inspector
         if link is not None and getattr(link, "observer", False) is None:
@@ -216,20 +218,3 @@ class ConsoleState:
 
 def _plain(body: Any) -> dict[str, Any] | None:
     return dict(body) if body else None
-
-
-def _describe_options(family: str, settings: Any) -> dict[str, Any]:
-    """The ``dji-gateway decode`` options that match how this device's link is configured."""
-    if family == "osdk":
-        return {"firmware": settings.firmware}
-    if family == "robomaster":
-        control = settings.control
-        return {
-            "season": settings.season,
-            "max_data_len": settings.max_data_len,
-            "control_cmd_id": control.cmd_id,
-            "control_data_cmd_id": control.data_cmd_id,
-            "control_sender_id": control.sender_id,
-            "control_receiver_id": control.receiver_id,
-        }
-    return {}
