@@ -96,8 +96,11 @@ class Family:
     """One device family. Every reference is an import path (``"pkg.module:Name"``, or ``"pkg.module"``
     for a module) resolved on first use, or the object itself.
 
-    - ``settings``: the pydantic model of one ``[[devices]]`` entry; its ``type`` field is
-      ``Literal[name]``, it has ``sn`` and ``product`` (the device's Cloud API domain and type).
+    - ``settings``: the pydantic model of one ``[[devices]]`` entry (frozen, ``extra="forbid"``: see
+      ``adapters.config.DEVICE_MODEL_CONFIG``); its ``type`` field is ``Literal[name]``, and it has ``sn``,
+      ``product`` (the device's Cloud API domain and type: ``adapters.config.ProductSettings``) and
+      ``osd_period`` (None: the gateway's); optionally ``payload_index`` (unique per gateway) and ``url``
+      (a serial path the gateway checks before it starts).
     - ``adapter``: called with the validated settings, returns an :class:`adapters.base.Adapter`.
     - ``describe``: the CLI codec module: ``COMMANDS``, ``decode_bytes(data, **options)``,
       ``encode_command(name, seq, fields, **options)``; optionally ``decode_can_lines``/``encode_can``
