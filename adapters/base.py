@@ -6,7 +6,13 @@ from Cloud API methods to device commands and from device pushes to ``osd`` / ``
 dispatcher maps every failure to one Cloud API result code in one place. Adapters never see MQTT
 or JSON: they get validated pydantic ``data`` models and report through a :class:`TelemetrySink`.
 
-Error tree (adapter side; the gateway's own errors live in ``gateway.errors``)::
+Besides the methods and the failsafe, the contract says what the gateway may read of an adapter, so it
+never reaches into one: :meth:`Adapter.link_stats` (the link as an operator sees it,
+:class:`LinkStats`), :meth:`Adapter.observe_link` (the console's frame tap), :attr:`Adapter.last_heard`,
+and the typed snapshots live control needs (:meth:`Adapter.aircraft_pose`, :meth:`Adapter.gimbal_attitude`).
+:class:`Domain` names the Cloud API domains the gateway tells devices apart by.
+
+Error tree (adapter side; the gateway maps it to result codes in ``gateway/dispatcher.py``)::
 
     DeviceError
      ├── DeviceNotConnected   → 325012  link down or device silent
@@ -19,19 +25,25 @@ Error tree (adapter side; the gateway's own errors live in ``gateway.errors``)::
 from __future__ import annotations
 
 import abc
+import enum
 from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 __all__ = [
     "Adapter",
+    "AircraftPose",
     "CallResult",
     "DeviceError",
     "DeviceInfo",
     "DeviceNotConnected",
     "DeviceRejected",
     "DeviceTimeout",
+    "Domain",
+    "FrameObserver",
+    "GimbalAttitude",
     "InvalidParameters",
+    "LinkStats",
     "MethodNotSupported",
     "TelemetrySink",
 ]
@@ -66,6 +78,15 @@ class DeviceRejected(DeviceError):
         self.detail = dict(detail or {})
 
 
+class Domain(enum.StrEnum):
+    """The Cloud API device domain (``update_topo``'s ``domain``): what kind of device this is."""
+
+    AIRCRAFT = "0"
+    PAYLOAD = "1"  # a gimbal or camera of its own
+    RC = "2"  # a remote controller, or (here) a ground robot
+    DOCK = "3"
+
+
 @dataclass(frozen=True, slots=True)
 class DeviceInfo:
     """What ``update_topo`` announces for this device."""
@@ -87,6 +108,52 @@ class DeviceInfo:
 class CallResult:
     result: int = 0
     output: Mapping[str, Any] | None = field(default=None)
+
+
+@dataclass(frozen=True, slots=True)
+class LinkStats:
+    """One device link as an operator sees it (EMQX Neuron's per-link model: state, traffic, errors)."""
+
+    kind: str  # "can" or "serial"
+    where: str  # CAN channel or serial URL (never credentials: neither carries any)
+    up: bool
+    opens: int  # successful opens: the first and every reconnect
+    frames_in: int  # CAN frames on the device's id, or decoded protocol frames on a serial link
+    frames_out: int  # CAN frames sent, or frames written to the serial port
+    bytes_in: int | None
+    bytes_out: int | None
+    crc_errors: int
+    framing_errors: int  # bad frames that are not CRC failures: garbage, bad headers, truncation
+    send_errors: int
+    unmatched_replies: int  # late, duplicated or wrong-seq replies/ACKs: dropped, never misapplied
+
+
+#: A link's frame tap: ``observer("rx" | "tx", can_id or None, data)``, called from the link's threads.
+FrameObserver = Callable[[str, int | None, bytes], None]
+
+
+@dataclass(frozen=True, slots=True)
+class AircraftPose:
+    """What live control reports of an aircraft whose position is known (``osd_info_push``,
+    ``hsi_info_push``), Cloud API units."""
+
+    latitude: float
+    longitude: float | None
+    altitude: float | None  # WGS84 (m)
+    velocity: tuple[float, float, float] | None  # north, east, up (m/s)
+    attitude: tuple[float, float, float] | None  # roll, pitch, yaw (°)
+    gimbal: tuple[float, float, float] | None  # its own gimbal's roll, pitch, yaw (°)
+    #: obstacle distances (m) and sensor health by direction ("up", "down", "front" …), when reported
+    obstacles: Mapping[str, tuple[float, bool]] | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class GimbalAttitude:
+    """A gimbal's attitude (°), as it last reported it."""
+
+    yaw: float
+    roll: float
+    pitch: float
 
 
 class TelemetrySink(Protocol):
@@ -152,6 +219,29 @@ class Adapter(abc.ABC):
 
     def state_snapshot(self) -> Mapping[str, Any] | None:
         """The current ``state`` body (published after every connect), or None."""
+        return None
+
+    # -- what the gateway may read (metrics, the console, live control's pushes); on the loop -------
+    def link_stats(self) -> LinkStats | None:
+        """The device's link statistics, or None for a device without a link of its own."""
+        return None
+
+    def observe_link(self, observer: FrameObserver) -> bool:
+        """Attach the console's frame tap to the link, once; False when there is no link to tap (yet)
+        or a tap is attached already."""
+        return False
+
+    @property
+    def last_heard(self) -> float | None:
+        """When the device last sent a valid frame (the adapter's monotonic clock), None: never."""
+        return None
+
+    def aircraft_pose(self) -> AircraftPose | None:
+        """An aircraft's pose once its position is known; None for every other device."""
+        return None
+
+    def gimbal_attitude(self) -> GimbalAttitude | None:
+        """A gimbal's attitude once reported; None for every other device."""
         return None
 
     def supports(self, method: str) -> bool:

@@ -78,9 +78,19 @@ class SerialLink:
         self.bytes_in = 0
         self.bytes_out = 0
         self.frames_out = 0  # write() calls: every adapter here writes one whole frame per call
+        self.send_errors = 0  # writes that failed (and closed the link)
         self.opens = 0  # successful opens (the first one and every reopen), for the reconnect metric
         #: frame tap: ``observer(direction, None, data)`` (see the module doc)
         self.observer: Callable[[str, int | None, bytes], None] | None = None
+
+    #: what the link statistics call it (adapters.supervision.SupervisedLink); frames received are
+    #: protocol frames, counted by the adapter's stream decoder, not here
+    kind = "serial"
+    frames_in: int | None = None
+
+    @property
+    def where(self) -> str:
+        return self.url
 
     @property
     def up(self) -> bool:
@@ -208,6 +218,7 @@ class SerialLink:
                     self.bytes_out += len(data)
                     self._observe("tx", data)
                 except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+                    self.send_errors += 1
                     self._from_thread(self._failed, gen, f"write failed: {type(exc).__name__}: {exc}")
                     return
         finally:

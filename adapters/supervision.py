@@ -8,7 +8,10 @@ link every ``reopen_interval`` (absent hardware is not an error: said once, then
 :meth:`~adapters.base.TelemetrySink.online_changed`. :class:`SupervisedAdapter` owns that loop
 and that flag, so they cannot drift apart between families; a family says only what differs
 through the hooks (``_on_link_opened``, ``_supervise_tick``, ``_on_went_silent``,
-``_on_online_changed``). Knows nothing of any wire protocol, codec or Cloud API method.
+``_on_online_changed``). It also answers, once for every family, what the gateway may read of a
+link (:meth:`SupervisedAdapter.link_stats`, :meth:`~SupervisedAdapter.observe_link`,
+:attr:`~SupervisedAdapter.last_heard`): a family only says where its stream decoder's counters are
+(:meth:`SupervisedAdapter._decoder_stats`). Knows nothing of any wire protocol, codec or Cloud API method.
 """
 
 from __future__ import annotations
@@ -17,16 +20,19 @@ import asyncio
 import contextlib
 import logging
 from collections.abc import Callable
-from typing import ClassVar, Protocol
+from typing import Any, ClassVar, Protocol
 
 from adapters.absence import Absence
-from adapters.base import Adapter, DeviceInfo, TelemetrySink
+from adapters.base import Adapter, DeviceInfo, FrameObserver, LinkStats, TelemetrySink
+from adapters.wire.stream import DecoderStats, StreamDecoder
 
 __all__ = ["SupervisedAdapter", "SupervisedLink", "SupervisionTiming"]
 
 
 class SupervisedLink(Protocol):
-    """What supervision needs of a link (``CanLink``, ``SerialLink``)."""
+    """What supervision needs of a link (``CanLink``, ``SerialLink``), and what its statistics read."""
+
+    observer: FrameObserver | None  # the console's frame tap (None: none)
 
     @property
     def up(self) -> bool: ...
@@ -34,6 +40,38 @@ class SupervisedLink(Protocol):
     async def open(self) -> None: ...
 
     def close(self) -> None: ...
+
+    @property
+    def kind(self) -> str:
+        """ "can" or "serial"."""
+        ...
+
+    @property
+    def where(self) -> str:
+        """The CAN channel or the serial URL (neither carries credentials)."""
+        ...
+
+    @property
+    def opens(self) -> int: ...
+
+    @property
+    def frames_in(self) -> int | None:
+        """Frames received by the link itself; None: the adapter's stream decoder counts them."""
+        ...
+
+    @property
+    def frames_out(self) -> int: ...
+
+    @property
+    def bytes_in(self) -> int | None:
+        """None: the link does not count bytes (CAN)."""
+        ...
+
+    @property
+    def bytes_out(self) -> int | None: ...
+
+    @property
+    def send_errors(self) -> int: ...
 
 
 class SupervisionTiming(Protocol):
@@ -63,6 +101,10 @@ class SupervisedAdapter(Adapter):
     _log: ClassVar[logging.Logger]
 
     _link: SupervisedLink | None
+    #: the stream decoder the link's bytes go through (its counters feed :meth:`link_stats`), if kept here
+    _decoder: StreamDecoder[Any] | None = None
+    #: replies or ACKs that matched no request in flight (late, duplicated, wrong seq); families count them
+    unmatched_replies: int = 0
 
     def __init__(self, info: DeviceInfo, timing: SupervisionTiming, now: Callable[[], float]) -> None:
         self.info = info
@@ -74,7 +116,6 @@ class SupervisedAdapter(Adapter):
         self._online = False
         self._stopping = False
         self._last_heard = float("-inf")  # when the device last sent a valid frame (``now`` clock)
-        self.link_opens = 0  # successful opens by the supervisor: the first one and every reopen
         self._absence = Absence(timing.reopen_interval)
 
     @property
@@ -101,7 +142,6 @@ class SupervisedAdapter(Adapter):
                     continue
                 if (back := self._absence.opened(self._now(), what)) is not None:
                     self._log.info("%s", back)
-                self.link_opens += 1
                 self._on_link_opened()
             await self._supervise_tick(self._now())
             await asyncio.sleep(0.1)
@@ -133,6 +173,52 @@ class SupervisedAdapter(Adapter):
         self._on_online_changed(online)
         if self._sink is not None:
             self._sink.online_changed(self.info.sn, online)
+
+    # -- what the gateway reads (adapters.base.Adapter's contract) ---------------------------------
+    def link_stats(self) -> LinkStats | None:
+        """The link's counters and the stream decoder's (frames in on a serial link, CRC and framing
+        errors); None before ``start()`` built the link. Counters restart when a family replaces its
+        decoder on a reopen; the exporter keeps what it exports monotonic."""
+        link = self._link
+        if link is None:
+            return None
+        stats = self._decoder_stats()
+        bad = stats.bad_frames if stats is not None else 0
+        crc = stats.crc_errors if stats is not None else 0
+        frames_in = link.frames_in
+        if frames_in is None:
+            frames_in = stats.frames if stats is not None else 0
+        return LinkStats(
+            kind=link.kind,
+            where=link.where,
+            up=link.up,
+            opens=link.opens,
+            frames_in=frames_in,
+            frames_out=link.frames_out,
+            bytes_in=link.bytes_in,
+            bytes_out=link.bytes_out,
+            crc_errors=crc,
+            framing_errors=max(0, bad - crc),
+            send_errors=link.send_errors,
+            unmatched_replies=self.unmatched_replies,
+        )
+
+    def observe_link(self, observer: FrameObserver) -> bool:
+        link = self._link
+        if link is None or link.observer is not None:
+            return False
+        link.observer = observer
+        return True
+
+    @property
+    def last_heard(self) -> float | None:
+        heard = self._last_heard
+        return None if heard == float("-inf") else heard
+
+    def _decoder_stats(self) -> DecoderStats | None:
+        """The counters of the stream decoder the link's bytes go through: ``self._decoder``'s by default;
+        a family that keeps its decoder elsewhere overrides this."""
+        return self._decoder.stats if self._decoder is not None else None
 
     # -- hooks ------------------------------------------------------------------------------------
     def _on_link_opened(self) -> None:

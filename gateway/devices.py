@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
-from adapters.base import Adapter
+from adapters.base import Adapter, Domain
 
 __all__ = ["AuthorityState", "DeviceTable"]
 
@@ -50,7 +50,7 @@ class DeviceTable:
     def serving(self, method: str) -> list[Adapter]:
         """Adapters that implement ``method``, aircraft first (they own flight methods)."""
         found = [a for a in self._by_sn.values() if a.supports(method)]
-        return sorted(found, key=lambda a: a.info.domain != "0")
+        return sorted(found, key=lambda a: a.info.domain != Domain.AIRCRAFT)
 
     def payload_indexes(self) -> list[str]:
         return sorted(self._by_payload)

@@ -16,7 +16,7 @@ import contextlib
 import logging
 import re
 from collections import OrderedDict
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -50,6 +50,7 @@ from schemas import (
 )
 from schemas.envelope import ErrorOutput, ResultReply, ServicesReplyMessage
 from schemas.registry import Registry
+from schemas.services import DrcModeEnter
 
 log = logging.getLogger(__name__)
 
@@ -85,6 +86,15 @@ class Outbox(Protocol):
     def publish(self, topic: str, payload: bytes, qos: int = 1, retain: bool = False) -> bool: ...
 
 
+class LiveControl(Protocol):
+    """What the dispatcher asks of live control (:class:`gateway.drc.DrcController`): the two services
+    that enter and leave it, answered as (result code, output)."""
+
+    async def enter(self, data: DrcModeEnter) -> tuple[int, dict[str, Any] | None]: ...
+
+    async def exit(self) -> tuple[int, dict[str, Any] | None]: ...
+
+
 @dataclass
 class _Cached:
     expires: float
@@ -105,8 +115,7 @@ class Dispatcher:
         metrics: Metrics,
         on_authority_change: Callable[[], None] | None = None,
         on_events_reply: Callable[[str, int], None] | None = None,
-        drc_handler: Callable[[bytes], Awaitable[None]] | None = None,
-        drc: Any = None,
+        drc: LiveControl | None = None,
     ) -> None:
         self.gateway_sn = gateway_sn
         self.registry = registry
@@ -117,7 +126,6 @@ class Dispatcher:
         self.metrics = metrics
         self.on_authority_change = on_authority_change
         self.on_events_reply = on_events_reply
-        self.drc_handler = drc_handler
         self.drc = drc  # gateway.drc.DrcController (enter/exit), None: live control unavailable
         self._replies: OrderedDict[str, _Cached] = OrderedDict()
         self._pending = 0
@@ -173,11 +181,8 @@ class Dispatcher:
             self._events_reply(payload)
         elif kind is TopicKind.PROPERTY_SET:
             self._property_set(payload)
-        elif kind is TopicKind.DRC_DOWN:
-            if self.drc_handler is not None:
-                await self.drc_handler(payload)
-            else:
-                self.metrics.inc("inbound_rejected_total", reason="drc_not_entered")
+        elif kind is TopicKind.DRC_DOWN:  # live control answers drc/down in the network thread, not here
+            self.metrics.inc("inbound_rejected_total", reason="drc_not_entered")
         elif kind in (TopicKind.STATUS_REPLY, TopicKind.REQUESTS_REPLY):
             self._cloud_answer(kind, payload)
         else:

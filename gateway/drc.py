@@ -49,13 +49,13 @@ import re
 import threading
 import time
 from collections import deque
-from collections.abc import Awaitable, Callable, Sequence
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from pydantic import ValidationError
 
-from adapters.base import Adapter
+from adapters.base import Adapter, AircraftPose, Domain
 from gateway import drc_session as ds
 from gateway.audit import audit
 from gateway.clock import Clock, SystemClock
@@ -67,6 +67,7 @@ from gateway.settings import BrokerSettings, GatewaySettings
 from schemas import ResultCode, TopicKind, echo_heart_beat, error_reply_from_validation, reply_for, topic
 from schemas.drc import SILENT_WHEN_ACCEPTED
 from schemas.registry import Registry
+from schemas.services import DrcModeEnter
 
 log = logging.getLogger(__name__)
 
@@ -278,7 +279,7 @@ class DrcController:
         self._closing: set[asyncio.Task[None]] = set()
         self._targets: tuple[Adapter, ...] = ()
         #: an aircraft or robot is here (flight authority governs sticks), else payloads only
-        self._has_movable = any(a.info.domain != "1" for a in devices)
+        self._has_movable = any(a.info.domain != Domain.PAYLOAD for a in devices)
         self._push_task: asyncio.Task[None] | None = None
         self._pending_broker: dict[Any, Any] = {}  # link key -> drc_mode_enter's mqtt_broker, until opened
         self._failure_logged: dict[tuple[str, str], float] = {}
@@ -386,7 +387,7 @@ class DrcController:
             self.loop.call_soon_threadsafe(fn, *args)
 
     # ------------------------------------------------------------------- enter / exit (the loop)
-    async def enter(self, data: Any) -> tuple[int, dict[str, Any] | None]:
+    async def enter(self, data: DrcModeEnter) -> tuple[int, dict[str, Any] | None]:
         broker = data.mqtt_broker
         if broker.expire_time and broker.expire_time < self.clock.time_ms() / 1000:
             return ResultCode.INVALID_PARAMETERS, {"reason": "mqtt_broker credentials already expired"}
@@ -560,8 +561,8 @@ class DrcController:
         targets = tuple(
             a
             for a in self.devices
-            if (a.info.domain != "1" and a.info.sn in auth.flight)
-            or (a.info.domain == "1" and a.info.payload_index in auth.payloads)
+            if (a.info.domain != Domain.PAYLOAD and a.info.sn in auth.flight)
+            or (a.info.domain == Domain.PAYLOAD and a.info.payload_index in auth.payloads)
         )
         lost = [a for a in self._targets if a not in targets]
         self._targets = targets
@@ -825,25 +826,24 @@ class DrcController:
             return
         self._up.publish(self.up_topic, msg.model_dump_json().encode(), qos=0)
 
-    def _aircraft(self) -> Any:
+    def _aircraft(self) -> AircraftPose | None:
+        """The first aircraft whose position is known."""
         for adapter in self.devices:
-            telemetry = getattr(adapter, "telemetry", None)
-            if adapter.info.domain == "0" and telemetry is not None and telemetry.latitude is not None:
-                return adapter
+            if adapter.info.domain == Domain.AIRCRAFT and (pose := adapter.aircraft_pose()) is not None:
+                return pose
         return None
 
     def _osd_info(self) -> dict[str, Any] | None:
-        aircraft = self._aircraft()
-        if aircraft is None:
+        t = self._aircraft()
+        if t is None:
             return None  # the push's position fields are required: nothing to say without an aircraft
-        t = aircraft.telemetry
         north, east, up = t.velocity or (0.0, 0.0, 0.0)
         _, _, yaw = t.attitude or (0.0, 0.0, 0.0)
         g_roll, g_pitch, g_yaw = t.gimbal or (0.0, 0.0, 0.0)
         for adapter in self.devices:  # a gimbal of its own on this gateway reports better angles
-            attitude = getattr(adapter, "attitude", None)
-            if adapter.info.domain == "1" and attitude is not None:
-                g_yaw, g_roll, g_pitch = attitude
+            attitude = adapter.gimbal_attitude()
+            if adapter.info.domain == Domain.PAYLOAD and attitude is not None:
+                g_yaw, g_roll, g_pitch = attitude.yaw, attitude.roll, attitude.pitch
                 break
         return {
             "attitude_head": yaw,
@@ -876,7 +876,7 @@ class DrcController:
         360 one-degree bins: :func:`around_distances`); otherwise sensing is reported off (distances 0,
         ``*_enable``/``*_work`` false), never invented."""
         aircraft = self._aircraft()
-        obstacles = getattr(aircraft.telemetry, "obstacles", None) if aircraft is not None else None
+        obstacles = aircraft.obstacles if aircraft is not None else None
         if not obstacles:
             return {"up_distance": 0, "down_distance": 0, "around_distances": [], "up_enable": False,
                     "up_work": False, "down_enable": False, "down_work": False}  # fmt: skip
@@ -908,7 +908,7 @@ def _mm(reading: tuple[float, bool]) -> int:
     return max(0, round(distance * 1000)) if working and distance == distance else 0
 
 
-def around_distances(obstacles: dict[str, tuple[float, bool]]) -> list[int]:
+def around_distances(obstacles: Mapping[str, tuple[float, bool]]) -> list[int]:
     """The seed's ``around_distances``: 360 one-degree bins clockwise from the nose, in mm.
 
     The flight controller measures four sectors (front, right, back, left), each centred on its axis

@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from adapters.base import Adapter
+from adapters.base import Adapter, Domain
 
 __all__ = ["left_doing"]
 
@@ -35,7 +35,7 @@ def _where(osd: Mapping[str, Any]) -> str:
 def left_doing(adapter: Adapter) -> str:
     """One line: the device, its kind, and what it is doing now that the gateway has stopped it."""
     info = adapter.info
-    kind = {"0": "aircraft", "1": "gimbal"}.get(info.domain, "robot")
+    kind = {Domain.AIRCRAFT: "aircraft", Domain.PAYLOAD: "gimbal"}.get(info.domain, "robot")
     head = f"left {info.sn} ({kind})"
     if not adapter.online:
         return f"{head} offline: nothing was sent to it"

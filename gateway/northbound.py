@@ -21,7 +21,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from adapters.base import Adapter
+from adapters.base import Adapter, Domain
 from gateway.clock import Clock
 from gateway.devices import DeviceTable
 from gateway.dispatcher import Outbox
@@ -37,9 +37,9 @@ __all__ = ["Northbound", "profile_of"]
 
 def profile_of(adapter: Adapter) -> Profile:
     """The osd/state body a device publishes, from its Cloud API domain and family."""
-    if adapter.info.domain == "0":
+    if adapter.info.domain == Domain.AIRCRAFT:
         return Profile.AIRCRAFT
-    if adapter.info.domain == "1":
+    if adapter.info.domain == Domain.PAYLOAD:
         return Profile.GIMBAL
     return Profile.ROBOT
 

@@ -8,9 +8,9 @@ broker connection) into Prometheus families and one JSON document. They are serv
 
 Every request reads the gateway through one :meth:`Observability.snapshot`, taken **on the event loop**
 (with a deadline): a loop that cannot answer within :data:`LOOP_DEADLINE` makes ``/healthz`` fail, which
-is exactly what a container health check or a supervisor should notice. Link statistics are read from
-the links and stream decoders the adapters already keep (``frames_in``/``frames_out``, ``stats``), by
-duck typing in :func:`link_stats`; counters that restart with a new decoder are kept monotonic here.
+is exactly what a container health check or a supervisor should notice. Link statistics come from the
+adapters' contract (:meth:`adapters.base.Adapter.link_stats`, implemented once by the supervisor for
+every linked family); counters that restart with a new decoder are kept monotonic here.
 Never exposes a secret: the broker URL is reduced to scheme, host and port; settings are not served.
 Knows nothing of paho, bytes or Cloud API methods.
 """
@@ -23,7 +23,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -36,9 +36,11 @@ from prometheus_client.core import (
 )
 from prometheus_client.registry import Collector
 
+from adapters.base import LinkStats
+
 log = logging.getLogger(__name__)
 
-__all__ = ["LOOP_DEADLINE", "PREFIX", "VERSION", "LinkStats", "Observability", "link_stats", "safe_url"]
+__all__ = ["LOOP_DEADLINE", "PREFIX", "VERSION", "LinkStats", "Observability", "safe_url"]
 
 PREFIX = "djigw_"
 #: How long the event loop may take to hand over a snapshot before the gateway counts as unhealthy.
@@ -119,53 +121,7 @@ except importlib.metadata.PackageNotFoundError:  # pragma: no cover - running fr
 
 
 # ------------------------------------------------------------------------------------------ link statistics
-@dataclass(frozen=True, slots=True)
-class LinkStats:
-    """One device link as an operator sees it (EMQX Neuron's per-link model: state, traffic, errors)."""
-
-    kind: str  # "can" or "serial"
-    where: str  # CAN channel or serial URL (never credentials: neither carries any)
-    up: bool
-    opens: int  # successful opens: the first and every reconnect
-    frames_in: int  # CAN frames on the device's id, or decoded protocol frames on a serial link
-    frames_out: int  # CAN frames sent, or frames written to the serial port
-    bytes_in: int | None
-    bytes_out: int | None
-    crc_errors: int
-    framing_errors: int  # bad frames that are not CRC failures: garbage, bad headers, truncation
-    send_errors: int
-    unmatched_replies: int  # late, duplicated or wrong-seq replies/ACKs: dropped, never misapplied
-
-
-def link_stats(adapter: Any) -> LinkStats | None:
-    """Read an adapter's link and stream decoder (``_link``; ``_rx.decoder`` or ``_decoder``).
-
-    Duck-typed on purpose: the adapters already keep these numbers, and an adapter without them
-    simply has no link metrics. Values may go backwards when an adapter replaces its decoder; the
-    exporter keeps the exported counters monotonic (:class:`_Monotonic`)."""
-    link = getattr(adapter, "_link", None)
-    if link is None:
-        return None
-    rx = getattr(adapter, "_rx", None)
-    decoder = getattr(rx, "decoder", None) if rx is not None else getattr(adapter, "_decoder", None)
-    stats = getattr(decoder, "stats", None)
-    bad = int(getattr(stats, "bad_frames", 0))
-    crc = int(getattr(stats, "crc_errors", 0))
-    serial = hasattr(link, "url")
-    return LinkStats(
-        kind="serial" if serial else "can",
-        where=str(getattr(link, "url", None) or getattr(link, "channel", "")),
-        up=bool(getattr(link, "up", False)),
-        opens=int(getattr(link, "opens", 0)),
-        frames_in=int(getattr(stats, "frames", 0)) if serial else int(getattr(link, "frames_in", 0)),
-        frames_out=int(getattr(link, "frames_out", 0)),
-        bytes_in=int(link.bytes_in) if hasattr(link, "bytes_in") else None,
-        bytes_out=int(link.bytes_out) if hasattr(link, "bytes_out") else None,
-        crc_errors=crc,
-        framing_errors=max(0, bad - crc),
-        send_errors=int(getattr(link, "send_errors", 0)),
-        unmatched_replies=int(getattr(adapter, "unmatched_replies", 0)),
-    )
+# LinkStats is the adapters' contract (adapters.base); every adapter answers ``link_stats()`` itself.
 
 
 class _Monotonic:
@@ -247,7 +203,7 @@ class Observability:
         devices = []
         for adapter in app.devices:
             info = adapter.info
-            stats = link_stats(adapter)
+            stats = adapter.link_stats()
             link = None
             if stats is not None:
                 link = asdict(stats)

@@ -18,9 +18,9 @@ from typing import Any
 
 import pytest
 
+from adapters.base import LinkStats
 from adapters.rsdk.sim import GimbalCanSim, ReplyFaults
 from gateway.local_broker import LocalBroker
-from gateway.observability import LinkStats, link_stats
 from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
 
 pytestmark = pytest.mark.broker
@@ -38,7 +38,7 @@ class Rig:
         self.adapter = gw.app.devices.by_sn(SN)
 
     def link(self) -> LinkStats:
-        stats = self.gw.call(lambda: link_stats(self.adapter))
+        stats = self.gw.call(self.adapter.link_stats)
         assert stats is not None
         return stats
 

@@ -262,13 +262,13 @@ def test_referee_warnings_and_hits_become_events(rig: Rig) -> None:
 
 
 def test_pty_closed_and_reopened(rig: Rig) -> None:
-    opens = rig.adapter.link_opens
+    opens = rig.adapter.link_stats().opens
     rig.cloud.clear()
     rig.replug()  # the pty the gateway had open is gone; a new one sits behind the same path
     rig.in_topology(False)
     rig.cloud.clear()
     rig.in_topology(True)
-    assert rig.adapter.link_opens > opens  # SerialLink reopened, not merely a silent gap
+    assert rig.adapter.link_stats().opens > opens  # SerialLink reopened, not merely a silent gap
     rig.osd(lambda d: d.get("x_robot_id") == 3)
     _ok(rig.cloud.service("x_robomaster_chassis_velocity", {"vx": 1.0, "duration": 0.3}))
     wait_until(lambda: rig.board("received")["chassis_velocity"] >= 1, 3, what="commands reach the new pty")

@@ -83,7 +83,12 @@ def test_toy_family_end_to_end_through_the_gateway(broker: LocalBroker, vane: fa
 
 
 def test_toy_family_in_simulate(broker: LocalBroker, vane: families.Family) -> None:
-    doc = simulated_settings({"broker": {"url": f"mqtt://127.0.0.1:{broker.port}"}, "osd_period": 0.2})
+    base = {
+        "broker": {"url": f"mqtt://127.0.0.1:{broker.port}"},
+        "osd_period": 0.2,
+        "metrics": {"enabled": False},
+    }
+    doc = simulated_settings(base)
     doc["devices"] = [d for d in doc["devices"] if d["type"] == "vane"]
     assert doc["devices"] == [dict(toy_family.FAMILY.tour or {})]
     sims: list[Any] = []

@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from adapters.base import (
+    AircraftPose,
     CallResult,
     DeviceInfo,
     DeviceNotConnected,
@@ -525,6 +526,20 @@ class AircraftAdapter(SupervisedAdapter):
         if self.mission is not None and not self.mission.finished:
             return 5  # wayline
         return {11: 4, 12: 10, 15: 9, 33: 11, 17: 16}.get(t.display_mode or 0, 3)
+
+    def aircraft_pose(self) -> AircraftPose | None:
+        t = self.telemetry
+        if t.latitude is None:
+            return None
+        return AircraftPose(
+            latitude=t.latitude,
+            longitude=t.longitude,
+            altitude=t.altitude,
+            velocity=t.velocity,
+            attitude=t.attitude,
+            gimbal=t.gimbal,
+            obstacles=t.obstacles,
+        )
 
     def osd_snapshot(self) -> Mapping[str, Any] | None:
         t = self.telemetry

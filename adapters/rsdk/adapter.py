@@ -48,6 +48,7 @@ from adapters.base import (
     DeviceNotConnected,
     DeviceRejected,
     DeviceTimeout,
+    GimbalAttitude,
     InvalidParameters,
     MethodNotSupported,
     TelemetrySink,
@@ -66,6 +67,7 @@ from adapters.rsdk.config import RsdkDeviceSettings
 from adapters.rsdk.link import CanLink, LinkError
 from adapters.rsdk.protocol import Frame, encode
 from adapters.supervision import SupervisedAdapter
+from adapters.wire.stream import DecoderStats
 from schemas.results import ResultCode
 
 log = logging.getLogger(__name__)
@@ -208,7 +210,16 @@ class GimbalAdapter(SupervisedAdapter):
                     "speed_control", {"yaw_speed": 0, "roll_speed": 0, "pitch_speed": 0, "ctrl_byte": ctrl}
                 )
 
+    def gimbal_attitude(self) -> GimbalAttitude | None:
+        if self.attitude is None:
+            return None
+        yaw, roll, pitch = self.attitude
+        return GimbalAttitude(yaw=yaw, roll=roll, pitch=pitch)
+
     # -- link supervision (the loop is SupervisedAdapter's) ----------------------------------------
+    def _decoder_stats(self) -> DecoderStats:
+        return self._rx.decoder.stats
+
     def _on_link_opened(self) -> None:
         self._rx.reset()
         self._next_poll = 0.0

@@ -83,12 +83,21 @@ class CanLink:
         self._sendq: queue.SimpleQueue[can.Message | _Sent | None] = queue.SimpleQueue()
         self._sender: threading.Thread | None = None
         self._up = False
-        self.frames_in = 0
+        self.frames_in = 0  # CAN frames on rx_id
         self.frames_out = 0
         self.send_errors = 0
         self.opens = 0  # successful opens (the first one and every reopen), for the reconnect metric
         #: frame tap: ``observer(direction, arb_id, data)`` from the link's threads (see the module doc)
         self.observer: Callable[[str, int | None, bytes], None] | None = None
+
+    #: what the link statistics call it (adapters.supervision.SupervisedLink); a CAN link counts no bytes
+    kind = "can"
+    bytes_in: int | None = None
+    bytes_out: int | None = None
+
+    @property
+    def where(self) -> str:
+        return self.channel
 
     @property
     def up(self) -> bool:

@@ -7,10 +7,10 @@ home points the map draws, the frame inspectors and the journal. :meth:`ConsoleS
 the gateway's event loop** (the web server asks for it once per push tick, with a deadline), so it
 reads the live objects without locks; it must stay cheap (no I/O, no decoding).
 
-This is the only module of the console that reads adapter internals (the link object for the frame tap
-and its statistics through :func:`gateway.observability.link_stats`, the last-heard time, firmware
-attributes); when the adapter contract offers them (``link_stats()``, typed snapshots), they are
-switched here and nowhere else. Must not know HTTP or the page.
+Reads adapters through their contract (:class:`adapters.base.Adapter`: ``link_stats()``,
+``observe_link()`` for the frame tap, ``last_heard``, the ``osd``/``state`` snapshots); the firmware
+version shown is the ``state`` body's, or an adapter's public ``firmware_version``/``version``. Must not
+know HTTP or the page.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from dataclasses import asdict
 from typing import Any
 
 from adapters.base import Adapter
-from gateway.observability import VERSION, link_stats, safe_url
+from gateway.observability import VERSION, safe_url
 from gateway.web.frames import LinkInspector, inspectable
 from gateway.web.journal import Journal
 
@@ -72,11 +72,10 @@ class ConsoleState:
     def _inspector(self, adapter: Adapter) -> LinkInspector | None:
         sn = adapter.info.sn
         inspector = self.inspectors.get(sn)
-        link = getattr(adapter, "_link", None)
         if inspector is None:
             settings = getattr(adapter, "settings", None)
             family = str(getattr(settings, "type", ""))
-            stats = link_stats(adapter)
+            stats = adapter.link_stats()
             describe = inspectable(family)
             if describe is None or stats is None:
                 return None
@@ -89,8 +88,7 @@ class ConsoleState:
                 options=options_for(settings) if options_for is not None else {},
             )
             self.inspectors[sn] = inspector
-        if link is not None and getattr(link, "observer", False) is None:
-            link.observer = inspector.tap  # the link exists from start(); a tap is attached once
+        adapter.observe_link(inspector.tap)  # the link exists from start(); a tap is attached once
         return inspector
 
     # -- the pushed document (the gateway's loop) ------------------------------------------------------
@@ -119,8 +117,8 @@ class ConsoleState:
         info = adapter.info
         settings = getattr(adapter, "settings", None)
         self._inspector(adapter)
-        stats = link_stats(adapter)
-        heard = getattr(adapter, "_last_heard", None)
+        stats = adapter.link_stats()
+        heard = adapter.last_heard
         osd = _plain(adapter.osd_snapshot())
         state = _plain(adapter.state_snapshot())
         firmware = (state or {}).get("firmware_version") or getattr(adapter, "firmware_version", None)
