@@ -69,7 +69,6 @@ class SerialLink:
         self.on_bytes, self.on_down = on_bytes, on_down
         self._options = dict(options or {})
         self._loop = loop
-        self._port: serial.SerialBase | None = None
         self._writeq: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
         self._threads: list[threading.Thread] = []
         self._fd: int | None = None
@@ -114,7 +113,6 @@ class SerialLink:
                     f"'fuser -v {self.url}' or 'lsof {self.url}')"
                 ) from None
             raise LinkError(f"cannot open {self.url}: {exc}") from None
-        self._port = port
         self._generation += 1
         gen = self._generation
         self._writeq = queue.SimpleQueue()
@@ -168,7 +166,6 @@ class SerialLink:
         self._up = False
         self._generation += 1
         self._writeq.put(None)
-        self._port = None
         fd, self._fd = self._fd, None
         if fd is not None:
             with contextlib.suppress(Exception):

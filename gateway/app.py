@@ -12,7 +12,6 @@ import asyncio
 import contextlib
 import logging
 from collections.abc import Callable, Sequence
-from typing import Any
 
 from adapters import families
 from adapters.base import Adapter
@@ -85,21 +84,17 @@ class GatewayApp:
         s = self.settings
         gw = s.gateway_sn
         subs = [(name, 1) for name in subscriptions(gw)]
-        # the will and the clean goodbye are the same: a topology with no sub-devices (all offline)
-        northbound_holder: dict[str, Any] = {}
-        self.bridge = MqttBridge(
+        # build the objects, then connect them with typed callbacks (as paho's are assigned)
+        bridge = self.bridge = MqttBridge(
             s.broker.for_live_control(s.drc.heartbeat_timeout),
             client_id=s.broker.client_id or f"djigw-{gw}",
             subscriptions=subs,
             loop=loop,
             metrics=self.metrics,
-            on_connected=lambda: northbound_holder["nb"].on_connected(),
-            inline=lambda t, p: northbound_holder["drc"].inline_main(t, p),
-            on_disconnected=lambda reason: northbound_holder["drc"].main_link_lost(reason),
             buffered=lambda name: name.endswith("/osd"),  # osd waits out an outage (bounded), in order
         )
-        outbox = _ObservedOutbox(self.bridge, self.published)
-        self.northbound = Northbound(
+        outbox = _ObservedOutbox(bridge, self.published)
+        nb = self.northbound = Northbound(
             settings=s,
             registry=self.registry,
             devices=self.devices,
@@ -107,26 +102,26 @@ class GatewayApp:
             clock=self.clock,
             metrics=self.metrics,
         )
-        northbound_holder["nb"] = self.northbound
-        nb = self.northbound
-        self.drc = DrcController(
+        drc = self.drc = DrcController(
             settings=s,
             registry=self.registry,
             devices=self.devices,
             metrics=self.metrics,
             loop=loop,
-            main_bridge=self.bridge,
+            main_bridge=bridge,
             publish_event=lambda method, data, need_reply: nb.event(gw, method, data, need_reply),
             publish_gateway_osd=nb.gateway_osd,
             clock=self.clock,
         )
-        northbound_holder["drc"] = self.drc
-        self.drc.start()
-        drc = self.drc
+        bridge.on_connected = nb.on_connected
+        bridge.inline = drc.inline_main
+        bridge.on_disconnected = drc.main_link_lost
         nb.gateway_osd_data = drc.osd_data
         nb.on_authority_lost = lambda sn: drc.refresh_targets()
-        offline = (topic(TopicKind.STATUS, gw), self.northbound.topology(offline=True))
-        self.bridge.set_will(*offline)
+        drc.start()
+        # the will and the clean goodbye are the same: a topology with no sub-devices (all offline)
+        offline = (topic(TopicKind.STATUS, gw), nb.topology(offline=True))
+        bridge.set_will(*offline)
         self.dispatcher = Dispatcher(
             gateway_sn=gw,
             registry=self.registry,
@@ -136,14 +131,14 @@ class GatewayApp:
             clock=self.clock,
             metrics=self.metrics,
             on_authority_change=self._authority_changed,
-            on_events_reply=self.northbound.events_reply,
-            drc=self.drc,
+            on_events_reply=nb.events_reply,
+            drc=drc,
         )
         self.drc.call_service = self.dispatcher.call_local  # drc_gimbal_reset runs as gimbal_reset
         for adapter in self.devices:
-            await adapter.start(self.northbound)
-        self.bridge.start()
-        periodic = loop.create_task(self.northbound.run(self.stop_event), name="northbound")
+            await adapter.start(nb)
+        bridge.start()
+        periodic = loop.create_task(nb.run(self.stop_event), name="northbound")
         consumer = loop.create_task(self._consume(), name="inbound")
         if s.metrics.enabled:
             self.observability = Observability(self, loop).start(s.metrics.host, s.metrics.port)

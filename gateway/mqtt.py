@@ -190,7 +190,6 @@ class MqttBridge:
         subscriptions: list[tuple[str, int]],
         loop: asyncio.AbstractEventLoop,
         metrics: Metrics,
-        will: tuple[str, bytes] | None = None,
         on_connected: Callable[[], None] | None = None,
         name: str = "main",
         inline: Callable[[str, bytes], bool] | None = None,
@@ -206,11 +205,14 @@ class MqttBridge:
         self.endpoints = settings.endpoints
         self._loop = loop
         self._metrics = metrics
-        self._on_connected = on_connected
-        # ``inline`` sees every message in the network thread first and may consume it (returns True):
-        # DRC heartbeats and sticks are answered there, so a busy event loop cannot delay them.
-        self._inline = inline
-        self._on_disconnected = on_disconnected
+        # The callbacks, given here or assigned before :meth:`start` (as paho's are), once the objects
+        # they call exist. ``on_connected`` runs in the loop after each (re)connect. ``inline`` sees every
+        # message in the network thread first and may consume it (returns True): DRC heartbeats and
+        # sticks are answered there, so a busy event loop cannot delay them. ``on_disconnected`` runs in
+        # the network thread when an established connection is lost.
+        self.on_connected: Callable[[], None] | None = on_connected
+        self.inline: Callable[[str, bytes], bool] | None = inline
+        self.on_disconnected: Callable[[str], None] | None = on_disconnected
         self._buffered = buffered  # QoS 0 topics kept in the offline buffer (osd); None: none
         self._name = name
         self._clock = clock
@@ -247,10 +249,10 @@ class MqttBridge:
         self._failing_since: float | None = None  # first failed attempt of the current streak
         self._supervisor: threading.Thread | None = None
         self._ssl: ssl.SSLContext | None = None
-        self._client = self._build_client(will)
+        self._client = self._build_client()
 
     # -- set-up ---------------------------------------------------------------------------------
-    def _build_client(self, will: tuple[str, bytes] | None) -> paho.Client:
+    def _build_client(self) -> paho.Client:
         s = self.settings
         v5 = s.protocol == "5"
         client = paho.Client(
@@ -268,8 +270,6 @@ class MqttBridge:
         if s.tls:
             self._ssl = self._ssl_context()
             client.tls_set_context(self._ssl)
-        if will is not None:
-            client.will_set(will[0], will[1], qos=1, retain=False)
         client.max_queued_messages_set(10000)
         client.connect_timeout = s.connect_timeout
         client.on_connect = self._on_connect
@@ -720,18 +720,18 @@ class MqttBridge:
         if reason.is_failure and self._session_live:
             self._metrics.inc("mqtt_disconnects_total", link=self._name)
             log.warning("lost broker %s (%s): %s", self._where(), self._name, reason)
-            if self._on_disconnected is not None:
+            if self.on_disconnected is not None:
                 try:
-                    self._on_disconnected(str(reason))
+                    self.on_disconnected(str(reason))
                 except Exception:
                     log.exception("disconnect hook failed")
         self._session_live = False
         self._done.set()
 
     def _on_message(self, client: paho.Client, userdata: Any, msg: paho.MQTTMessage) -> None:
-        if self._inline is not None:
+        if self.inline is not None:
             try:
-                if self._inline(msg.topic, msg.payload):
+                if self.inline(msg.topic, msg.payload):
                     self._metrics.inc("mqtt_messages_in_total", link=self._name)
                     return
             except Exception:  # never let a handler kill paho's thread
@@ -749,9 +749,9 @@ class MqttBridge:
     # -- loop side ------------------------------------------------------------------------------
     def _after_connect(self) -> None:
         self._connected.set()
-        if self._on_connected is not None:
+        if self.on_connected is not None:
             try:
-                self._on_connected()
+                self.on_connected()
             except Exception:
                 self._metrics.inc("handler_exceptions_total", where="on_connected")
                 log.exception("on_connected hook failed")
