@@ -1,5 +1,7 @@
-"""The composition root: the only place that builds concrete adapters from settings and wires the
-broker connection, the dispatcher, the northbound publisher and the devices together.
+"""The composition root: the only place that builds adapters from settings (each through the family its
+``type`` names in :mod:`adapters.families`; this module knows no family) and wires the broker connection,
+the dispatcher, the northbound publisher, live control and the devices together: objects first, then the
+typed callbacks between them.
 
 Owns the service's life cycle: start devices (absent hardware is not an error: it comes online
 later), connect to the broker, hand every received message to the dispatcher, publish telemetry,
