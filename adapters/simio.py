@@ -17,7 +17,7 @@ import socket
 import threading
 import time
 import tty
-from typing import Protocol
+from typing import Protocol, Self
 
 log = logging.getLogger(__name__)
 
@@ -43,7 +43,7 @@ class _Endpoint:
         self._lock = threading.Lock()
         self.paused = False  # when True the device neither reads nor answers (a "silent" device)
 
-    def start(self) -> _Endpoint:
+    def start(self) -> Self:
         self._thread = threading.Thread(target=self._run, name=type(self).__name__, daemon=True)
         self._thread.start()
         return self
@@ -54,7 +54,7 @@ class _Endpoint:
             self._thread.join(timeout=5)
         self._close()
 
-    def __enter__(self) -> _Endpoint:
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -298,11 +298,11 @@ class TcpFarm:
                 if fd in server_index:
                     i = server_index[fd]
                     with contextlib.suppress(BlockingIOError):
-                        client, _ = self._servers[i].accept()
-                        client.setblocking(True)
-                        client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                        accepted, _ = self._servers[i].accept()
+                        accepted.setblocking(True)
+                        accepted.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                         self._drop(i)
-                        self._clients[i] = client
+                        self._clients[i] = accepted
                     continue
                 i = client_index[fd]
                 client = self._clients[i]

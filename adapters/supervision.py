@@ -101,8 +101,9 @@ class SupervisedAdapter(Adapter):
     _log: ClassVar[logging.Logger]
 
     _link: SupervisedLink | None
-    #: the stream decoder the link's bytes go through (its counters feed :meth:`link_stats`), if kept here
-    _decoder: StreamDecoder[Any] | None = None
+    #: the stream decoder the link's bytes go through (its counters feed :meth:`link_stats`); a family
+    #: that keeps it elsewhere (rsdk: in its CAN reassembler) overrides :meth:`_decoder_stats` instead
+    _decoder: StreamDecoder[Any]
     #: replies or ACKs that matched no request in flight (late, duplicated, wrong seq); families count them
     unmatched_replies: int = 0
 
@@ -218,7 +219,8 @@ class SupervisedAdapter(Adapter):
     def _decoder_stats(self) -> DecoderStats | None:
         """The counters of the stream decoder the link's bytes go through: ``self._decoder``'s by default;
         a family that keeps its decoder elsewhere overrides this."""
-        return self._decoder.stats if self._decoder is not None else None
+        decoder: StreamDecoder[Any] | None = getattr(self, "_decoder", None)  # set by the family's __init__
+        return decoder.stats if decoder is not None else None
 
     # -- hooks ------------------------------------------------------------------------------------
     def _on_link_opened(self) -> None:

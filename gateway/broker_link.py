@@ -141,12 +141,12 @@ class ReconnectPolicy:
         self.takeover_suspected = True
         self.takeover_count += 1
         self._takeovers += 1
-        ceiling = min(self.takeover_backoff_max, TAKEOVER_FIRST * 2 ** min(self._takeovers - 1, 32))
+        ceiling = min(self.takeover_backoff_max, TAKEOVER_FIRST * 2.0 ** min(self._takeovers - 1, 32))
         return now + self._rng.uniform(ceiling / 2, ceiling)
 
     def takeover_wait(self) -> float:
         """The ceiling of the current takeover backoff (for the log line)."""
-        return min(self.takeover_backoff_max, TAKEOVER_FIRST * 2 ** max(self._takeovers - 1, 0))
+        return min(self.takeover_backoff_max, TAKEOVER_FIRST * 2.0 ** max(self._takeovers - 1, 0))
 
 
 @dataclass(slots=True)

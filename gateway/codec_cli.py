@@ -130,7 +130,7 @@ def _is_hex_word(word: str) -> bool:
     return word == "-" or not word.startswith("-")
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:
+def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     dec = sub.add_parser(
         "decode",
         help="decode frames from hex (arguments or stdin) into JSON lines",
@@ -155,11 +155,11 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 def _family_options(p: argparse.ArgumentParser) -> None:
     for option in _cli_options():
+        parse: dict[str, Any] = {"type": _integer} if option.integer else {}
         p.add_argument(
-            option.flag,
-            dest=option.option,
-            choices=option.choices,
-            type=(lambda text: int(text, 0)) if option.integer else None,
-            default=None,
-            help=option.help,
+            option.flag, dest=option.option, choices=option.choices, default=None, help=option.help, **parse
         )
+
+
+def _integer(text: str) -> int:
+    return int(text, 0)  # 0x… accepted

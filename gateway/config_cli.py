@@ -207,7 +207,7 @@ def update_readme(path: Path) -> bool:
 
 
 # ------------------------------------------------------------------------------------------ command
-def add_parsers(sub: argparse._SubParsersAction) -> None:
+def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "check-config",
         help="validate a config file and print the resolved settings (secrets masked)",

@@ -67,7 +67,7 @@ _DRC_PUSHES = frozenset({"osd_info_push", "hsi_info_push", "delay_info_push"})
 
 
 # ------------------------------------------------------------------------------------------ arguments
-def add_parsers(sub: argparse._SubParsersAction) -> None:
+def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     send = sub.add_parser(
         "send",
         help="publish one Cloud API service and print its reply",
@@ -369,7 +369,7 @@ def cmd_send(ns: argparse.Namespace) -> int:
         request_topic, reply_topic = f"thing/product/{gw}/services", f"thing/product/{gw}/services_reply"
 
         def matches(reply: dict[str, Any]) -> bool:
-            return reply.get("tid") == body["tid"] and reply.get("bid") == body["bid"]
+            return bool(reply.get("tid") == body["tid"] and reply.get("bid") == body["bid"])
 
     found: list[dict[str, Any]] = []
     arrived = threading.Event()

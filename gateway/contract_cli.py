@@ -187,7 +187,8 @@ def _typed(
         key, sep, text = pair.partition("=")
         if not sep or not key:
             raise ValueError(f"expected field=value, got {pair!r}")
-        node, obj = out, root
+        node: dict[str, Any] = out
+        obj: dict[str, Any] | None = root
         *parents, leaf = key.split(".")
         for name in parents:
             child = node.setdefault(name, {})
@@ -267,7 +268,7 @@ def check_request(
 
 
 # ------------------------------------------------------------------------------------------ the command
-def add_parsers(sub: argparse._SubParsersAction) -> None:
+def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "methods",
         help="list the Cloud API methods (or one method's fields) from the contract",
@@ -295,12 +296,13 @@ def cmd_methods(ns: argparse.Namespace) -> int:
             for s in specs:
                 print(f"  {s.method:<{width}}  {s.summary}")
         return 0
-    kind = _kind_of(ns.method, reg)
-    if kind is None:
+    found = _kind_of(ns.method, reg)
+    if found is None:
         near = closest(ns.method, [m for k in SENT_KINDS for m in reg.methods(k)])
         guess = f"; did you mean {' or '.join(near)}?" if near else ""
         print(f"dji-gateway methods: unknown method {ns.method}{guess}", file=sys.stderr)
         return 2
+    kind = found
     spec = reg.spec(kind, ns.method)
     assert spec is not None
     if ns.json:

@@ -35,7 +35,8 @@ def _where(osd: Mapping[str, Any]) -> str:
 def left_doing(adapter: Adapter) -> str:
     """One line: the device, its kind, and what it is doing now that the gateway has stopped it."""
     info = adapter.info
-    kind = {Domain.AIRCRAFT: "aircraft", Domain.PAYLOAD: "gimbal"}.get(info.domain, "robot")
+    kinds: dict[str, str] = {Domain.AIRCRAFT: "aircraft", Domain.PAYLOAD: "gimbal"}
+    kind = kinds.get(info.domain, "robot")
     head = f"left {info.sn} ({kind})"
     if not adapter.online:
         return f"{head} offline: nothing was sent to it"

@@ -148,7 +148,7 @@ class Sticks:
         return out
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:
+def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "fly",
         help="live flight control (DRC) from the keyboard",
@@ -215,7 +215,7 @@ class _Session:
                 self._arrived.wait(left)
             reply = self._replies.pop(body["tid"])
         rdata = reply.get("data") or {}
-        output = rdata.get("output") if isinstance(rdata.get("output"), dict) else {}
+        output: dict[str, Any] = rdata["output"] if isinstance(rdata.get("output"), dict) else {}
         return int(rdata.get("result", 0) or 0), str(output.get("reason", ""))
 
     def drc(self, method: str, data: dict[str, Any]) -> None:

@@ -465,7 +465,7 @@ class MqttBridge:
         s = self.settings
         kwargs: dict[str, Any] = {"keepalive": s.keepalive}
         if s.protocol == "5":
-            props = Properties(PacketTypes.CONNECT)
+            props = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]  # paho: no annotations
             props.SessionExpiryInterval = s.session_expiry
             kwargs["properties"] = props
             # a fresh session when the process starts, the same session on every later connection (any
@@ -731,7 +731,7 @@ class MqttBridge:
     def _on_message(self, client: paho.Client, userdata: Any, msg: paho.MQTTMessage) -> None:
         if self.inline is not None:
             try:
-                if self.inline(msg.topic, msg.payload):
+                if self.inline(msg.topic, bytes(msg.payload)):  # paho's payload is bytes: not copied
                     self._metrics.inc("mqtt_messages_in_total", link=self._name)
                     return
             except Exception:  # never let a handler kill paho's thread

@@ -324,5 +324,6 @@ def channel_index(i: int) -> str:
 def _device_secret(settings: GatewaySettings, sn: str) -> str:
     for d in settings.devices:
         if d.sn == sn and d.product.device_secret is not None:
-            return d.product.device_secret.get_secret_value()
+            secret: str = d.product.device_secret.get_secret_value()
+            return secret
     return ""

@@ -369,25 +369,25 @@ def _families(snap: dict[str, Any]) -> Iterator[Metric]:
             gauges.setdefault(name, []).append((labels, value))
     for name, series in sorted(gauges.items()):
         keys = sorted({k for labels, _ in series for k in labels})
-        family = GaugeMetricFamily(p + name, HELP.get(name, name.replace("_", " ")), labels=keys)
+        gauge = GaugeMetricFamily(p + name, HELP.get(name, name.replace("_", " ")), labels=keys)
         for labels, value in series:
-            family.add_metric([labels.get(k, "") for k in keys], value)
-        yield family
+            gauge.add_metric([labels.get(k, "") for k in keys], value)
+        yield gauge
 
     histograms: dict[str, list[tuple[dict[str, str], Any, list[int], float]]] = {
         "services_latency_seconds": []
     }
     for name, labels, bounds, counts, total, _count in snap["histograms"]:
         histograms.setdefault(name, []).append((labels, bounds, counts, total))
-    for name, series in sorted(histograms.items()):
-        keys = sorted({k for labels, *_ in series for k in labels})
-        family = HistogramMetricFamily(p + name, HELP.get(name, name.replace("_", " ")), labels=keys)
-        for labels, bounds, counts, total in series:
+    for name, histogram_series in sorted(histograms.items()):
+        keys = sorted({k for labels, *_ in histogram_series for k in labels})
+        histogram = HistogramMetricFamily(p + name, HELP.get(name, name.replace("_", " ")), labels=keys)
+        for labels, bounds, counts, total in histogram_series:
             if not counts:
                 continue
             buckets = [(repr(float(b)), counts[i]) for i, b in enumerate(bounds)] + [("+Inf", counts[-1])]
-            family.add_metric([labels.get(k, "") for k in keys], buckets, total)
-        yield family
+            histogram.add_metric([labels.get(k, "") for k in keys], buckets, total)
+        yield histogram
 
     # -- devices and their links (read live, per scrape) --------------------------------------------
     online = GaugeMetricFamily(f"{p}device_online", "1 while the device is online", labels=["device", "type"])

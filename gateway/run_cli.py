@@ -66,7 +66,7 @@ def simulated_settings(base: dict[str, Any]) -> dict[str, Any]:
     return doc
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:
+def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     run = sub.add_parser("run", help="run the gateway service")
     run.add_argument("--config", "-c", help="TOML config file (DJIGW_* environment variables override it)")
     run.add_argument(

@@ -329,9 +329,8 @@ def _device(value: Any) -> BaseModel:
     models = families.settings_models()
     union = _device_unions.get(models)
     if union is None:
-        union = _device_unions[models] = TypeAdapter(
-            Annotated[Union[models], Field(discriminator="type")]  # noqa: UP007 - built from a tuple
-        )
+        discriminated: Any = Annotated[Union[models], Field(discriminator="type")]  # noqa: UP007 - a tuple
+        union = _device_unions[models] = TypeAdapter(discriminated)
     device: BaseModel = union.validate_python(value)
     return device
 

@@ -27,7 +27,7 @@ def default_url() -> str:
     return f"http://127.0.0.1:{port}"
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:
+def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "status",
         help="print the live state of a running gateway (devices, links, DRC)",

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Callable
-from typing import Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 from pydantic import (
     AllowInfNan,
@@ -161,6 +161,18 @@ def _only_ints(enum_cls: type[enum.IntEnum]) -> Callable[[Any], Any]:
 def int_enum(enum_cls: type[E]) -> Any:
     """An integer enum field type that accepts the enum's integer values only."""
     return Annotated[enum_cls, BeforeValidator(_only_ints(enum_cls))]
+
+
+if TYPE_CHECKING:
+    #: ``IntEnumField[MyEnum]``: :func:`int_enum` spelt as a type (a type checker sees ``MyEnum``)
+    IntEnumField = Annotated[E, "int enum"]
+else:
+
+    class IntEnumField:
+        """``IntEnumField[MyEnum]``: :func:`int_enum` spelt as a type (a type checker sees ``MyEnum``)."""
+
+        def __class_getitem__(cls, enum_cls: type[E]) -> Any:
+            return int_enum(enum_cls)
 
 
 def enum_description(enum_cls: type[enum.Enum], meanings: dict[Any, str]) -> str:

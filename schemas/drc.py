@@ -17,6 +17,7 @@ from .base import (
     Bool,
     Float,
     InboundModel,
+    IntEnumField,
     Latitude,
     Longitude,
     OutboundModel,
@@ -24,7 +25,6 @@ from .base import (
     Seq,
     Text,
     TimestampMs,
-    int_enum,
 )
 from .envelope import EmptyRequest
 from .osd import Battery, ModeCode
@@ -265,7 +265,7 @@ class DrcDroneStatePush(OutboundModel):
     protection), never invented.
     """
 
-    mode_code: int_enum(ModeCode) = Field(description="Aircraft state, as in the osd.")
+    mode_code: IntEnumField[ModeCode] = Field(description="Aircraft state, as in the osd.")
     stealth_state: Bool | None = None
     night_lights_state: Bool | None = None
     landing_type: Annotated[int, Field(strict=True, ge=0, le=4)] | None = None

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import inspect
 import re
-from typing import Annotated, Any, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal, cast
 
 from pydantic import ConfigDict, Field, JsonValue, StringConstraints, create_model, model_validator
 
@@ -278,21 +278,25 @@ def message_class(
     """
     kind = TopicKind(kind)
     key = (kind, method, data, reply)
-    cls = _CLASSES.get(key)
-    if cls is None:
+    made = _CLASSES.get(key)
+    if made is None:
         base = METHOD_BASES[kind]
         doc = inspect.cleandoc(data.__doc__ or "")
-        cls = create_model(
-            f"{camel(kind.value)}{camel(method)}",
-            __base__=base,
-            __doc__=f"``{method}`` on ``{kind.value}``. {doc}".strip(),
-            __module__=__name__,
-            method=(Literal[method], ...),
-            data=(data, ...),
+        literal: Any = Literal[method]  # the literal of a value known at run time
+        made = cast(
+            "type[Envelope]",
+            create_model(
+                f"{camel(kind.value)}{camel(method)}",
+                __base__=base,
+                __doc__=f"``{method}`` on ``{kind.value}``. {doc}".strip(),
+                __module__=__name__,
+                method=(literal, ...),
+                data=(data, ...),
+            ),
         )
-        cls.reply_data = reply
-        _CLASSES[key] = cls
-    return cls
+        made.reply_data = reply
+        _CLASSES[key] = made
+    return made
 
 
 _TELEMETRY_BASES: dict[TopicKind, type[TelemetryMessage]] = {
@@ -306,15 +310,18 @@ def telemetry_class(kind: TopicKind, profile: str, data: type[ContractModel]) ->
     """The osd/state envelope class of one device profile with ``data`` as its body (made once, cached)."""
     kind = TopicKind(kind)
     key = (kind, profile, data)
-    cls = _TELEMETRY_CLASSES.get(key)
-    if cls is None:
+    made = _TELEMETRY_CLASSES.get(key)
+    if made is None:
         doc = inspect.cleandoc(data.__doc__ or "")
-        cls = create_model(
-            f"{camel(kind.value)}{camel(profile)}",
-            __base__=_TELEMETRY_BASES[kind],
-            __doc__=f"``{kind.value}`` of a {profile}. {doc}".strip(),
-            __module__=__name__,
-            data=(data, ...),
+        made = cast(
+            "type[TelemetryMessage]",
+            create_model(
+                f"{camel(kind.value)}{camel(profile)}",
+                __base__=_TELEMETRY_BASES[kind],
+                __doc__=f"``{kind.value}`` of a {profile}. {doc}".strip(),
+                __module__=__name__,
+                data=(data, ...),
+            ),
         )
-        _TELEMETRY_CLASSES[key] = cls
-    return cls
+        _TELEMETRY_CLASSES[key] = made
+    return made

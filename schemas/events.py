@@ -12,7 +12,7 @@ from typing import Annotated
 
 from pydantic import Field
 
-from .base import Float, Int, Latitude, Longitude, OutboundModel, Text, enum_description, int_enum
+from .base import Float, Int, IntEnumField, Latitude, Longitude, OutboundModel, Text, enum_description
 from .results import ResultValue
 from .state import DrcState, DrcStateField
 
@@ -110,7 +110,7 @@ class DrcStatusNotify(OutboundModel):
 class JoystickInvalidNotify(OutboundModel):
     """Why stick control stopped working (seed 003 § Reason notification of invalid Joystick control)."""
 
-    reason: int_enum(JoystickInvalidReason) = Field(description=_JOYSTICK)
+    reason: IntEnumField[JoystickInvalidReason] = Field(description=_JOYSTICK)
 
 
 __all__ = [

@@ -22,13 +22,13 @@ from pydantic import ConfigDict, Field, model_validator
 from .base import (
     Float,
     Int,
+    IntEnumField,
     Latitude,
     Longitude,
     OutboundModel,
     PayloadIndex,
     TimestampMs,
     enum_description,
-    int_enum,
 )
 from .state import DrcStateField, DrcStateProperty, require_any
 
@@ -147,7 +147,7 @@ class AircraftOsd(OutboundModel):
     """
 
     model_config = ConfigDict(extra="allow")
-    __pydantic_extra__: dict[str, PayloadOsd] = Field(init=False)  # type: ignore[assignment]
+    __pydantic_extra__: dict[str, PayloadOsd] = Field(init=False)
 
     latitude: Latitude | None = None
     longitude: Longitude | None = None
@@ -158,7 +158,7 @@ class AircraftOsd(OutboundModel):
     attitude_head: Angle | None = Field(default=None, description="Heading (°), 0 north, clockwise positive.")
     horizontal_speed: Speed | None = Field(default=None, ge=0, description="Ground speed (m/s).")
     vertical_speed: Speed | None = Field(default=None, description="Vertical speed (m/s); positive is up.")
-    mode_code: int_enum(ModeCode) | None = Field(default=None, description=_MODE_CODE)
+    mode_code: IntEnumField[ModeCode] | None = Field(default=None, description=_MODE_CODE)
     battery: Battery | None = None
     drc_state: DrcStateField | None = Field(
         default=None, description="0 disconnected, 1 connecting, 2 connected."
@@ -198,8 +198,10 @@ class CameraOsd(OutboundModel):
     """One camera of ``cameras[]`` (Cloud API names)."""
 
     payload_index: PayloadIndex
-    camera_mode: int_enum(CameraOsdMode) | None = Field(default=None, description="0 photo, 1 video, ...")
-    recording_state: int_enum(RecordingState) | None = Field(default=None, description="0 idle, 1 recording.")
+    camera_mode: IntEnumField[CameraOsdMode] | None = Field(default=None, description="0 photo, 1 video, ...")
+    recording_state: IntEnumField[RecordingState] | None = Field(
+        default=None, description="0 idle, 1 recording."
+    )
     zoom_factor: Float | None = Field(default=None, ge=1, le=200)
 
 

@@ -290,7 +290,7 @@ class Registry:
             raise ValueError(f"{spec.method}: data must be an {'Inbound' if inbound else 'Outbound'}Model")
         if spec.reply is not None and not issubclass(spec.reply, OutboundModel if inbound else InboundModel):
             raise ValueError(f"{spec.method}: reply must be an {'Outbound' if inbound else 'Inbound'}Model")
-        entries = [(spec.kind, spec.method, spec.message)]
+        entries: list[tuple[TopicKind, str, type[Envelope] | None]] = [(spec.kind, spec.method, spec.message)]
         if spec.reply is not None:
             entries.append((reply_kind(spec.kind), spec.method, spec.reply_message))
         old = self._specs.get((spec.kind, spec.method))
@@ -300,10 +300,10 @@ class Registry:
             if taken is not None and taken not in replaceable:
                 raise ValueError(f"{method!r} is already registered on {kind.value!r}")
         if old is not None:
-            for kind in (old.kind, old.reply_kind):
-                if kind is not None:
-                    self._messages.pop((kind, old.method), None)
-                    self._adapters.pop(kind, None)
+            for old_kind in (old.kind, old.reply_kind):
+                if old_kind is not None:
+                    self._messages.pop((old_kind, old.method), None)
+                    self._adapters.pop(old_kind, None)
         self._specs[(spec.kind, spec.method)] = spec
         for kind, method, cls in entries:
             assert cls is not None
@@ -359,7 +359,8 @@ class Registry:
             else:
                 classes = tuple(cls for (k, _), cls in self._messages.items() if k == kind)
                 if classes:
-                    adapter = TypeAdapter(Annotated[Union[classes], Field(discriminator="method")])  # noqa: UP007
+                    union: Any = Annotated[Union[classes], Field(discriminator="method")]  # noqa: UP007
+                    adapter = TypeAdapter(union)
                     # A union of models made by create_model in other modules can be left "not fully
                     # defined" by pydantic until rebuilt; rebuilding once here makes it usable at once.
                     adapter.rebuild(raise_errors=True)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypeGuard
 
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
@@ -106,7 +106,8 @@ def _as_dict(raw: Any) -> dict[str, Any] | None:
     return None
 
 
-def _valid(adapter: TypeAdapter[Any], value: Any) -> bool:
+def _valid(value: Any, adapter: TypeAdapter[Any]) -> TypeGuard[str]:
+    """``value`` passes ``adapter`` (a constrained string: an identifier, a method or property name …)."""
     try:
         adapter.validate_python(value)
     except ValidationError:
@@ -116,7 +117,7 @@ def _valid(adapter: TypeAdapter[Any], value: Any) -> bool:
 
 def _echo_gateway(value: Any) -> str | None:
     # The inbound envelope takes any gateway string; only a well-formed SN is echoed back.
-    return value if _valid(_serial, value) else None
+    return value if _valid(value, _serial) else None
 
 
 def error_reply_from_validation(
@@ -138,22 +139,22 @@ def error_reply_from_validation(
         return None
     message = _as_dict(raw) or {}
     method = message.get("method")
-    method = method if _valid(_method_name, method) else None
+    method = method if _valid(method, _method_name) else None
     result = result_for_validation_error(exc)
     output = ErrorOutput(reason=validation_reason(exc, tag=method))
-    gateway = gateway if _valid(_serial, gateway) else None
+    gateway = gateway if _valid(gateway, _serial) else None
     if kind is TopicKind.DRC_DOWN:
         if method is None:
             return None
         return DrcErrorReply(method=method, data=ResultReply(result=result, output=output))
     tid, bid = message.get("tid"), message.get("bid")
-    if not (_valid(_identifier, tid) and _valid(_identifier, bid)):
+    if not _valid(tid, _identifier) or not _valid(bid, _identifier):
         return None
     if timestamp is None:
         raise ValueError("timestamp (ms) is required for a thing-topic reply")
     if kind is TopicKind.PROPERTY_SET:
         data = message.get("data")
-        names = [name for name in data if _valid(_property_name, name)][:64] if isinstance(data, dict) else []
+        names = [name for name in data if _valid(name, _property_name)][:64] if isinstance(data, dict) else []
         return PropertySetReplyMessage(
             tid=tid,
             bid=bid,

@@ -84,7 +84,7 @@ def ground_station_ack(ack: int) -> int:
 def meaning(code: int) -> str:
     """A short meaning for any result code, including the 336xxx family and codes not in the table."""
     try:
-        return ResultCode(code).meaning
+        return ResultCode(code).meaning  # type: ignore[call-arg]  # a lookup by value, not a new member
     except ValueError:
         pass
     if GROUND_STATION_ACK_BASE < code < GROUND_STATION_ACK_BASE + 1000:

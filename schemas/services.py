@@ -20,13 +20,13 @@ from .base import (
     Float,
     InboundModel,
     Int,
+    IntEnumField,
     Latitude,
     Longitude,
     PayloadIndex,
     Secret,
     Text,
     enum_description,
-    int_enum,
 )
 from .envelope import EmptyRequest
 
@@ -191,8 +191,8 @@ class TakeoffToPoint(InboundModel):
         description="Return-to-home height above the take-off point (m).",
         json_schema_extra={"x-unit": "m"},
     )
-    rc_lost_action: int_enum(RcLostAction) | None = Field(default=None, description=_RC_LOST)
-    exit_wayline_when_rc_lost: int_enum(ExitWaylineWhenRcLost) | None = Field(
+    rc_lost_action: IntEnumField[RcLostAction] | None = Field(default=None, description=_RC_LOST)
+    exit_wayline_when_rc_lost: IntEnumField[ExitWaylineWhenRcLost] | None = Field(
         default=None, description=_EXIT_WAYLINE
     )
     flight_id: Text = Field(min_length=1, description="Task UUID of this take-off.")
@@ -241,7 +241,7 @@ class FlyToPointStop(EmptyRequest):
 class CameraModeSwitch(PayloadRequest):
     """Switch the camera mode (seed 003 § switch the camera mode)."""
 
-    camera_mode: int_enum(CameraMode) = Field(description=_CAMERA_MODE)
+    camera_mode: IntEnumField[CameraMode] = Field(description=_CAMERA_MODE)
 
 
 class CameraPhotoTake(PayloadRequest):
@@ -307,4 +307,4 @@ class CameraFocalLengthSet(PayloadRequest):
 class GimbalReset(PayloadRequest):
     """Reset the gimbal (seed 003 § reset the gimbal)."""
 
-    reset_mode: int_enum(GimbalResetMode) = Field(description=_RESET_MODE)
+    reset_mode: IntEnumField[GimbalResetMode] = Field(description=_RESET_MODE)

@@ -13,7 +13,7 @@ import enum
 
 from pydantic import Field, model_validator
 
-from .base import Bool, Int, OutboundModel, PayloadIndex, SerialNumber, Text, enum_description, int_enum
+from .base import Bool, Int, IntEnumField, OutboundModel, PayloadIndex, SerialNumber, Text, enum_description
 
 
 class DrcState(enum.IntEnum):
@@ -33,7 +33,7 @@ _DRC_STATE = enum_description(
     },
 )
 #: A ``drc_state`` field: 0 disconnected, 1 connecting, 2 connected (integers only).
-DrcStateField = int_enum(DrcState)
+DrcStateField = IntEnumField[DrcState]
 
 
 class ControlSource(enum.StrEnum):
@@ -114,7 +114,7 @@ class RobotState(OutboundModel):
         default=None, ge=1, le=255, description="Extension. Referee robot id: red 1-11, blue 101-111."
     )
     x_game_type: Int | None = Field(default=None, ge=0, le=15, description="Extension. Referee game_type.")
-    x_game_progress: int_enum(GameProgress) | None = Field(
+    x_game_progress: IntEnumField[GameProgress] | None = Field(
         default=None,
         description="Extension. Referee game_progress: 0 not started, 1 preparation, 2 self-check, "
         "3 countdown, 4 in game, 5 settling.",

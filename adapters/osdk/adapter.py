@@ -40,7 +40,7 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 from adapters.base import (
     AircraftPose,
@@ -343,7 +343,7 @@ class AircraftAdapter(SupervisedAdapter):
                 with contextlib.suppress(LinkError):
                     self._write(frame)
             for p in res.expired:
-                fut, name = p.tag  # type: ignore[misc]
+                fut, name = _waiter(p.tag)
                 if not fut.done():
                     fut.set_exception(DeviceTimeout(f"aircraft {self.info.sn} did not acknowledge {name}"))
             await asyncio.sleep(0.02)
@@ -355,7 +355,7 @@ class AircraftAdapter(SupervisedAdapter):
 
     def _fail_pending(self, exc: Exception) -> None:
         for p in self._sessions.clear():
-            fut, _ = p.tag  # type: ignore[misc]
+            fut, _ = _waiter(p.tag)
             if not fut.done():
                 fut.set_exception(exc)
 
@@ -422,7 +422,7 @@ class AircraftAdapter(SupervisedAdapter):
             if p is None:
                 self.unmatched_replies += 1  # late (after its deadline) or unknown: never matched to anything
                 return
-            fut, name = p.tag  # type: ignore[misc]
+            fut, name = _waiter(p.tag)
             if fut.done():
                 return
             try:
@@ -787,7 +787,8 @@ class AircraftAdapter(SupervisedAdapter):
     def _extension(self, method: str) -> Callable[[Any], Any]:
         async def call(data: Any) -> CallResult:
             self._require_online()
-            return await _EXTENSION_CALLS[method](self, data)
+            result: CallResult = await _EXTENSION_CALLS[method](self, data)
+            return result
 
         return call
 
@@ -898,6 +899,11 @@ async def _ext_release(adapter: AircraftAdapter, data: Any) -> CallResult:
     if adapter._sink is not None:
         adapter._sink.authority_lost(adapter.info.sn)
     return CallResult()
+
+
+def _waiter(tag: object) -> tuple[asyncio.Future[cmds.Message], str]:
+    """A pending frame's tag: the future its ACK resolves and the command's name (set where it is sent)."""
+    return cast("tuple[asyncio.Future[cmds.Message], str]", tag)
 
 
 _EXTENSION_CALLS: dict[str, Callable[[AircraftAdapter, Any], Any]] = {

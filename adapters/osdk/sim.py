@@ -786,7 +786,7 @@ class OsdkFcModel:
 
     @staticmethod
     def _mission_speed(info: Mapping[str, Any]) -> float:
-        return max(0.1, min(info["idle_vel"], info["vel_cmd_range"], MAX_SPEED))
+        return max(0.1, min(float(info["idle_vel"]), float(info["vel_cmd_range"]), MAX_SPEED))
 
     def _on_wp_start_stop(self, f: dict[str, Any], now: float) -> dict[str, Any]:
         if f["start"] == 1:  # cancel
@@ -1014,8 +1014,11 @@ class OsdkFcModel:
             self._step(h)
         self._t = now
 
-    def _step(self, h: float) -> None:
+    def _clear_yaw(self) -> None:
         self._yaw_target, self._yaw_rate_cmd = None, 0.0
+
+    def _step(self, h: float) -> None:
+        self._clear_yaw()  # the task sets them again (a call, so a type checker does not narrow them)
         vn, ve, vu = self._tasks[self.task]()
         lim = ACCEL_LIMIT * h
         dvn, dve = vn - self.vn, ve - self.ve

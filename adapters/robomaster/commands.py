@@ -60,7 +60,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final
 
 from adapters.robomaster.protocol import Frame, encode_frame
 from adapters.wire import bits as wire_bits
@@ -98,7 +98,7 @@ __all__ = [
 ]
 
 SEASONS: tuple[str, ...] = ("2024", "2025", "2026")
-DEFAULT_SEASON = "2026"
+DEFAULT_SEASON: Final = "2026"
 
 
 class MessageError(ValueError):

@@ -374,11 +374,13 @@ class GimbalAdapter(SupervisedAdapter):
         if frame.needs_reply:  # pragma: no cover - a table entry with a reply goes through request()
             raise ValueError(f"{name} gets a reply frame: use request()")
         done: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+        def sent() -> None:
+            if not done.done():
+                done.set_result(None)
+
         try:
-            self._link.send(
-                segment(encode(frame), self.settings.tx_id),
-                on_sent=lambda: done.done() or done.set_result(None),
-            )
+            self._link.send(segment(encode(frame), self.settings.tx_id), on_sent=sent)
             await asyncio.wait_for(done, self.settings.request_timeout)
         except LinkError as exc:
             raise DeviceNotConnected(str(exc)) from None

@@ -13,7 +13,7 @@ from typing import Annotated
 
 from pydantic import Field
 
-from schemas.base import Bool, Float, Int, OutboundModel, int_enum
+from schemas.base import Bool, Float, Int, IntEnumField, OutboundModel
 from schemas.envelope import ErrorOutput, ResultReply
 from schemas.results import ResultValue
 from schemas.services import PayloadRequest
@@ -79,7 +79,7 @@ class FollowMode(enum.IntEnum):
 
 
 class FollowModeSet(PayloadRequest):
-    mode: int_enum(FollowMode) = Field(description="0 lock, 2 yaw follow, 3 sport")
+    mode: IntEnumField[FollowMode] = Field(description="0 lock, 2 yaw follow, 3 sport")
 
 
 class GimbalPosition(PayloadRequest):

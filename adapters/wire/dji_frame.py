@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import struct
 import zlib
+from collections.abc import Callable
 from typing import NamedTuple
 
 from adapters.wire.crc import RSDK_CRC16_SEED, RSDK_CRC32_SEED, crc16_rsdk
@@ -85,7 +86,9 @@ _T8 = CRC16_T8
 _T16 = CRC16_T16
 _SEED16 = RSDK_CRC16_SEED
 _HDR_WORDS = struct.Struct("<6H").unpack_from  # bytes 0..11, stored CRC16 included
-_HEAD10_WORDS = struct.Struct("<5H").unpack_from  # bytes 0..9
+_HEAD10_WORDS: Callable[[bytes | bytearray], tuple[int, int, int, int, int]] = struct.Struct(
+    "<5H"
+).unpack_from  # bytes 0..9
 _PACK_HEAD = struct.Struct("<BHBB3xHH").pack_into  # SOF, length, byte 3, ENC, reserved, seq, CRC16
 _PACK_U32 = struct.Struct("<I").pack_into
 _READ_HEAD = struct.Struct("<xHBB3xH").unpack_from  # length word, byte 3, ENC, seq

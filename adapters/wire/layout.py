@@ -86,19 +86,20 @@ class Field:
         if self.is_float:
             if not isinstance(value, int | float):
                 raise LayoutError(f"{self.name}: expected a number, got {type(value).__name__}")
-            value = float(value)
-            if math.isnan(value) or math.isinf(value):
+            number = float(value)
+            if math.isnan(number) or math.isinf(number):
                 raise LayoutError(f"{self.name}: must be finite")
-            return value
+            return number
         if not isinstance(value, int):
             if isinstance(value, float) and value.is_integer():
                 value = int(value)
             else:
                 raise LayoutError(f"{self.name}: expected an integer, got {value!r}")
+        integer: int = value
         lo, hi = _INT_RANGES[self.code]
-        if not lo <= value <= hi:
-            raise LayoutError(f"{self.name}: {value} outside {self.code} range {lo}..{hi}")
-        return value
+        if not lo <= integer <= hi:
+            raise LayoutError(f"{self.name}: {integer} outside {self.code} range {lo}..{hi}")
+        return integer
 
 
 class PayloadCodec(Protocol):

@@ -40,6 +40,7 @@ from gateway.codec_cli import json_safe
 from gateway.observability import VERSION, Observability
 from gateway.settings import ConsoleSettings
 from gateway.web import actions
+from gateway.web.frames import LinkInspector
 from gateway.web.journal import redact
 from gateway.web.security import COOKIE, Denied, Guard, Who
 from gateway.web.state import ConsoleState
@@ -579,7 +580,7 @@ class WebServer:
             await asyncio.sleep(max(0.0, period - (loop.time() - started)))
 
     @staticmethod
-    async def _decode(inspector: Any) -> list[dict[str, Any]]:
+    async def _decode(inspector: LinkInspector) -> list[dict[str, Any]]:
         """The inspector's new frames, decoded a slice at a time (the loop yields between slices)."""
         new = inspector.poll(DECODE_SLICE, catch_up=DECODE_PER_TICK)
         for _ in range(DECODE_PER_TICK // DECODE_SLICE):  # what came meanwhile waits for the next tick
