@@ -9,8 +9,12 @@ from __future__ import annotations
 import gc
 import io
 import json
+import os
+import subprocess
+import sys
 import warnings
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -26,6 +30,7 @@ from tests import toy_family
 from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
 
 SN = "VANE-T-1"
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture
@@ -129,3 +134,31 @@ def test_toy_family_in_decode_encode_and_the_inspector(
     inspector.tap("rx", None, bytes.fromhex(" ".join(frame))[3:])
     (seen,) = inspector.poll()
     assert seen["command"] == "point" and seen["hex"] == "5a0201077d00e1"
+
+
+def test_toy_family_from_an_installed_entry_point(tmp_path: Path) -> None:
+    """A distribution that declares the family in the ``dji_gateway.families`` entry-point group is found
+    without any call: ``dji-gateway decode vane`` works in a fresh process."""
+    dist = tmp_path / "toy_vane-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: toy-vane\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[dji_gateway.families]\nvane = tests.toy_family:FAMILY\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
+    proc = subprocess.run(
+        [sys.executable, "-m", "gateway.cli", "decode", "vane", "5A 02 01 07 7D 00 E1"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["fields"] == {"heading": 12.5}
+    plain = subprocess.run(  # without the distribution the family is unknown
+        [sys.executable, "-m", "gateway.cli", "decode", "vane", "5A"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert plain.returncode == 2 and "invalid choice: 'vane'" in plain.stderr, plain.stderr
