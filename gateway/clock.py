@@ -1,7 +1,10 @@
-"""Time as a value: the dispatcher, DRC watchdog and telemetry ask a clock, so tests can drive it.
+"""Time as a value: the dispatcher, live control and the northbound ask the :class:`Clock` that
+``GatewayApp(clock=)`` is given, so tests can drive them.
 
 ``monotonic()`` for deadlines and intervals; ``time_ms()`` for the Cloud API's wall-clock
-``timestamp`` fields. Nothing else in the gateway reads the system clock directly.
+``timestamp`` fields. Not yet everything: the adapters, the broker connection and the web console take a
+``now`` callable of their own (``time.monotonic`` by default), and the operator CLIs (``monitor``,
+``fly``) read the system clock; one clock passed from ``GatewayApp`` down is open work (issue #18).
 """
 
 from __future__ import annotations
