@@ -140,6 +140,8 @@ class AircraftPose:
     latitude: float
     longitude: float | None
     altitude: float | None  # WGS84 (m)
+    height: float | None  # above the take-off point (m)
+    mode_code: int  # the Cloud API mode_code its osd reports
     velocity: tuple[float, float, float] | None  # north, east, up (m/s)
     attitude: tuple[float, float, float] | None  # roll, pitch, yaw (°)
     gimbal: tuple[float, float, float] | None  # its own gimbal's roll, pitch, yaw (°)

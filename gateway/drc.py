@@ -701,7 +701,8 @@ class DrcController:
         tid = f"drc-{request.method}-{self.session.session_id}-" + (
             f"seq-{seq}" if seq is not None else f"n-{self._forwarded}"
         )
-        result, output = int(ResultCode.INTERNAL_ERROR), {"reason": "no dispatcher to carry it out"}
+        result: int = int(ResultCode.INTERNAL_ERROR)
+        output: Any = {"reason": "no dispatcher to carry it out"}
         if self.call_service is not None:
             body = {
                 "tid": tid,
@@ -826,17 +827,18 @@ class DrcController:
             return
         self._up.publish(self.up_topic, msg.model_dump_json().encode(), qos=0)
 
-    def _aircraft(self) -> AircraftPose | None:
-        """The first aircraft whose position is known."""
+    def _aircraft(self) -> tuple[Adapter, AircraftPose] | None:
+        """The first aircraft whose position is known, and its pose."""
         for adapter in self.devices:
             if adapter.info.domain == Domain.AIRCRAFT and (pose := adapter.aircraft_pose()) is not None:
-                return pose
+                return adapter, pose
         return None
 
     def _osd_info(self) -> dict[str, Any] | None:
-        t = self._aircraft()
-        if t is None:
+        aircraft = self._aircraft()
+        if aircraft is None:
             return None  # the push's position fields are required: nothing to say without an aircraft
+        _, t = aircraft
         north, east, up = t.velocity or (0.0, 0.0, 0.0)
         _, _, yaw = t.attitude or (0.0, 0.0, 0.0)
         g_roll, g_pitch, g_yaw = t.gimbal or (0.0, 0.0, 0.0)
@@ -862,12 +864,12 @@ class DrcController:
     def _drone_state(self) -> dict[str, Any] | None:
         """``drc_drone_state_push``: the aircraft's ``mode_code`` (what its osd says); nothing without one."""
         aircraft = self._aircraft()
-        return {"mode_code": aircraft.mode_code()} if aircraft is not None else None
+        return {"mode_code": aircraft[1].mode_code} if aircraft is not None else None
 
     def _batteries(self) -> dict[str, Any] | None:
         """``drc_batteries_info_push``: the aircraft osd's ``battery`` struct; nothing before it is known."""
         aircraft = self._aircraft()
-        snapshot = aircraft.osd_snapshot() if aircraft is not None else None
+        snapshot = aircraft[0].osd_snapshot() if aircraft is not None else None
         battery = snapshot.get("battery") if snapshot else None
         return dict(battery) if battery else None
 
@@ -876,7 +878,7 @@ class DrcController:
         360 one-degree bins: :func:`around_distances`); otherwise sensing is reported off (distances 0,
         ``*_enable``/``*_work`` false), never invented."""
         aircraft = self._aircraft()
-        obstacles = aircraft.obstacles if aircraft is not None else None
+        obstacles = aircraft[1].obstacles if aircraft is not None else None
         if not obstacles:
             return {"up_distance": 0, "down_distance": 0, "around_distances": [], "up_enable": False,
                     "up_work": False, "down_enable": False, "down_work": False}  # fmt: skip

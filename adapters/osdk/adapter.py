@@ -535,6 +535,8 @@ class AircraftAdapter(SupervisedAdapter):
             latitude=t.latitude,
             longitude=t.longitude,
             altitude=t.altitude,
+            height=t.height,
+            mode_code=self.mode_code(),
             velocity=t.velocity,
             attitude=t.attitude,
             gimbal=t.gimbal,
