@@ -125,7 +125,12 @@ class Family:
     cli_options: tuple[CliOption, ...] = ()
 
     def settings_model(self) -> type[BaseModel]:
+        """The settings model; a model whose ``type`` does not default to the family's name is refused
+        (the settings' union tells families apart by it)."""
         model: type[BaseModel] = _load(self.settings)
+        kind = model.model_fields.get("type")
+        if kind is None or kind.default != self.name:
+            raise TypeError(f"family {self.name!r}: {model.__name__}.type must be Literal[{self.name!r}]")
         return model
 
     def build(self, settings: Any) -> Adapter:

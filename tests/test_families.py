@@ -17,6 +17,7 @@ from gateway.app import build_registry
 from gateway.config_cli import reference_markdown
 from gateway.settings import ConfigError, load_settings
 from schemas import TopicKind
+from tests import toy_family
 
 ROOT = Path(__file__).resolve().parents[1]
 FAMILY_PACKAGES = ("adapters.rsdk", "adapters.osdk", "adapters.robomaster")
@@ -126,5 +127,8 @@ def test_unknown_type_and_registration_rules() -> None:
         families.register(families.Family(name="rsdk", settings="x:y", adapter="x:z"))
     with pytest.raises(ValueError, match="built in"):
         families.unregister("osdk")
+    wrong = families.Family(name="lamp", settings=toy_family.VaneSettings, adapter=toy_family.VaneAdapter)
+    with pytest.raises(TypeError, match=r"family 'lamp': VaneSettings.type must be Literal\['lamp'\]"):
+        wrong.settings_model()
     with pytest.raises(ValueError, match="identifier"):
         families.register(families.Family(name="no way", settings="x:y", adapter="x:z"))
