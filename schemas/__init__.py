@@ -75,7 +75,15 @@ from .envelope import (
     ResultReply,
     TelemetryMessage,
 )
-from .registry import SEED_METHODS, TELEMETRY, MethodSpec, Profile, Registry, default_registry
+from .registry import (
+    SEED_METHODS,
+    TELEMETRY,
+    WAYLINE_METHODS,
+    MethodSpec,
+    Profile,
+    Registry,
+    default_registry,
+)
 from .replies import (
     echo_heart_beat,
     error_reply_from_validation,
@@ -102,6 +110,7 @@ __all__ = [
     "SEED_METHODS",
     "TELEMETRY",
     "TOPICS",
+    "WAYLINE_METHODS",
     "Direction",
     "DrcDownMessage",
     "DrcUpMessage",

@@ -1072,3 +1072,121 @@ GATEWAY_EXAMPLES: tuple[GatewayExample, ...] = (
         "The property is not writable on this device.",
     ),
 )
+
+_FLIGHT = "2b1e6a3c-1d0f-4a7e-9d7a-5b2f1c3e4d5f"
+_KMZ_MD5 = "7a7cea5060c55920b7619a2a981f2223"
+
+#: The wayline messages as DJI's reference cloud (DJI-Cloud-API-Demo) sends them: ``bid = flight_id`` for
+#: prepare/execute and in every flighttask_progress, ``"data": ""`` for services without parameters
+#: (WAYLINE-NOTES §1). Payloads that the contract normalises (``""`` → ``{}``) do not round-trip verbatim.
+WAYLINE_EXAMPLES: tuple[GatewayExample, ...] = (
+    GatewayExample(
+        TopicKind.SERVICES,
+        "flighttask_prepare",
+        {
+            "tid": "6f0c8a0e-2f4b-4c1e-9b59-0c8f5e0a7d11",
+            "bid": _FLIGHT,
+            "timestamp": 1717000000000,
+            "method": "flighttask_prepare",
+            "data": {
+                "flight_id": _FLIGHT,
+                "execute_time": 1717000030000,
+                "task_type": 0,
+                "wayline_type": 0,
+                "file": {
+                    "url": "https://bucket.example/wayline/demo.kmz?X-Amz-Expires=3600&X-Amz-Signature=abc",
+                    "fingerprint": _KMZ_MD5,
+                },
+                "rth_altitude": 100,
+                "rth_mode": 1,
+                "out_of_control_action": 0,
+                "exit_wayline_when_rc_lost": 1,
+                "wayline_precision_type": 1,
+            },
+        },
+        "The reference cloud prepares a task: bid = flight_id, fingerprint = lowercase MD5 of the KMZ.",
+    ),
+    GatewayExample(
+        TopicKind.SERVICES,
+        "flighttask_execute",
+        {
+            "tid": "0b7d3f0a-5a43-4f7e-8f0e-7f2d9f3c1a22",
+            "bid": _FLIGHT,
+            "timestamp": 1717000001000,
+            "method": "flighttask_execute",
+            "data": {"flight_id": _FLIGHT},
+        },
+        "The reference cloud starts the prepared task (bid = flight_id).",
+    ),
+    GatewayExample(
+        TopicKind.SERVICES,
+        "flighttask_pause",
+        {**_ENV, "timestamp": _TS, "method": "flighttask_pause", "data": ""},
+        'The reference cloud sends services without parameters with "data": "".',
+    ),
+    GatewayExample(
+        TopicKind.SERVICES,
+        "flighttask_recovery",
+        {**_ENV, "timestamp": _TS, "method": "flighttask_recovery", "data": ""},
+        'Resume the paused wayline ("data": "" as the reference cloud sends it).',
+    ),
+    GatewayExample(
+        TopicKind.EVENTS,
+        "flighttask_progress",
+        {
+            "tid": "9fb7c1d2-3e4f-4a5b-8c6d-7e8f9a0b1c2d",
+            "bid": _FLIGHT,
+            "timestamp": 1717000060000,
+            "gateway": _GW,
+            "need_reply": 1,
+            "method": "flighttask_progress",
+            "data": {
+                "result": 0,
+                "output": {
+                    "ext": {
+                        "flight_id": _FLIGHT,
+                        "wayline_id": 0,
+                        "current_waypoint_index": 1,
+                        "wayline_mission_state": 6,
+                        "media_count": 1,
+                        "track_id": "",
+                    },
+                    "progress": {"current_step": 25, "percent": 66},
+                    "status": "in_progress",
+                },
+            },
+        },
+        "Progress while flying: bid = flight_id, need_reply 1.",
+    ),
+    GatewayExample(
+        TopicKind.REQUESTS,
+        "flighttask_resource_get",
+        {
+            **_ENV,
+            "timestamp": _TS,
+            "gateway": _GW,
+            "method": "flighttask_resource_get",
+            "data": {"flight_id": _FLIGHT},
+        },
+        "The gateway asks for a fresh pre-signed URL of the task's KMZ before downloading it.",
+    ),
+    GatewayExample(
+        TopicKind.REQUESTS_REPLY,
+        "flighttask_resource_get",
+        {
+            **_ENV,
+            "timestamp": _TS,
+            "method": "flighttask_resource_get",
+            "data": {
+                "result": 0,
+                "output": {
+                    "file": {
+                        "url": "https://xx.oss-cn-hangzhou.aliyuncs.com/xx.kmz?Expires=1&OSSAccessKeyId=x&Signature=y",
+                        "fingerprint": _KMZ_MD5,
+                    }
+                },
+            },
+        },
+        "The cloud's answer: a fresh URL and the stored MD5.",
+    ),
+)

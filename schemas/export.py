@@ -35,7 +35,7 @@ from pydantic_core import core_schema
 
 from . import __doc__ as package_doc
 from .envelope import PropertySetMessage, PropertySetReplyMessage
-from .examples import GATEWAY_EXAMPLES, SEED_003
+from .examples import GATEWAY_EXAMPLES, SEED_003, WAYLINE_EXAMPLES
 from .registry import TELEMETRY, Profile, Registry, default_registry
 from .results import GROUND_STATION_ACK_BASE, ResultCode
 from .topics import TOPICS, Direction, TopicKind, template
@@ -141,7 +141,7 @@ def _examples(message: ExportedMessage, registry: Registry) -> list[dict[str, An
             parsed = registry.validate(example.kind, raw)
         payload = json.loads(parsed.model_dump_json(context={"reveal_secrets": True}))
         found.append({"name": "seed_003", "summary": example.section, "payload": payload})
-    for extra in GATEWAY_EXAMPLES:
+    for extra in (*GATEWAY_EXAMPLES, *WAYLINE_EXAMPLES):
         if extra.kind is message.kind and extra.name == message.name:
             profile = extra.name if extra.kind in (TopicKind.OSD, TopicKind.STATE) else None
             parsed = registry.validate(extra.kind, extra.payload, profile=profile)

@@ -78,6 +78,20 @@ from .services import (
 from .state import AircraftState, AuthorityState, RobotState
 from .status import UpdateTopo
 from .topics import TOPICS, Direction, TopicKind, reply_kind
+from .wayline import (
+    FlighttaskExecute,
+    FlighttaskPause,
+    FlighttaskPrepare,
+    FlighttaskProgress,
+    FlighttaskReady,
+    FlighttaskRecovery,
+    FlighttaskResourceGet,
+    FlighttaskResourceGetReply,
+    FlighttaskUndo,
+    ReturnHome,
+    ReturnHomeCancel,
+    ReturnHomeInfo,
+)
 
 
 class Profile(enum.StrEnum):
@@ -197,6 +211,32 @@ SEED_METHODS: tuple[MethodSpec, ...] = (
         InboundResult,
         "Device topology update",
         "PROTOCOL-NOTES § Topology first",
+    ),
+)
+
+
+def _wayline(kind: TopicKind, method: str, data: type, reply: type | None, summary: str) -> MethodSpec:
+    return MethodSpec(TopicKind(kind), method, data, reply, summary, "Cloud API wayline (WAYLINE-NOTES)")
+
+
+#: The wayline (route) methods of a dock-like gateway: DJI's dock pages, not seed 003 (schemas/wayline.py).
+WAYLINE_METHODS: tuple[MethodSpec, ...] = (
+    _wayline(_S, "flighttask_prepare", FlighttaskPrepare, ResultReply, "Issue a wayline task"),
+    _wayline(_S, "flighttask_execute", FlighttaskExecute, ResultReply, "Execute a prepared wayline task"),
+    _wayline(_S, "flighttask_undo", FlighttaskUndo, ResultReply, "Cancel wayline tasks not yet started"),
+    _wayline(_S, "flighttask_pause", FlighttaskPause, ResultReply, "Pause the running wayline"),
+    _wayline(_S, "flighttask_recovery", FlighttaskRecovery, ResultReply, "Resume the paused wayline"),
+    _wayline(_S, "return_home", ReturnHome, ResultReply, "Return to home"),
+    _wayline(_S, "return_home_cancel", ReturnHomeCancel, ResultReply, "Cancel the return to home"),
+    _wayline(_E, "flighttask_progress", FlighttaskProgress, InboundResult, "Wayline task progress"),
+    _wayline(_E, "flighttask_ready", FlighttaskReady, InboundResult, "Conditional tasks ready"),
+    _wayline(_E, "return_home_info", ReturnHomeInfo, InboundResult, "Planned path home"),
+    _wayline(
+        TopicKind.REQUESTS,
+        "flighttask_resource_get",
+        FlighttaskResourceGet,
+        FlighttaskResourceGetReply,
+        "Ask the cloud for a fresh KMZ URL",
     ),
 )
 
@@ -407,5 +447,5 @@ class Registry:
 
 
 def default_registry() -> Registry:
-    """A new registry holding every method of seed 003 (and update_topo)."""
-    return Registry(SEED_METHODS)
+    """A new registry holding every method of seed 003 (and update_topo) and the wayline methods."""
+    return Registry((*SEED_METHODS, *WAYLINE_METHODS))
