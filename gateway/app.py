@@ -19,6 +19,7 @@ from adapters import families
 from adapters.base import Adapter
 from gateway import logcontext
 from gateway.clock import Clock, SystemClock
+from gateway.cloud_requests import CloudRequests
 from gateway.devices import DeviceTable
 from gateway.dispatcher import Dispatcher
 from gateway.drc import DrcController
@@ -28,6 +29,7 @@ from gateway.mqtt import MqttBridge
 from gateway.northbound import Northbound
 from gateway.observability import Observability
 from gateway.settings import GatewaySettings
+from gateway.wayline.service import WaylineService
 from schemas import TopicKind, default_registry, subscriptions, topic
 from schemas.registry import Registry
 
@@ -75,6 +77,7 @@ class GatewayApp:
         self.dispatcher: Dispatcher | None = None
         self.northbound: Northbound | None = None
         self.drc: DrcController | None = None
+        self.wayline: WaylineService | None = None  # flighttask_* / return_home* (gateway/wayline)
         self.observability: Observability | None = None  # /metrics, /healthz, /status, / (None: off)
         #: told (topic, payload) of every message the northbound and the dispatcher publish, and of every
         #: message the dispatcher is handed (not drc/down, answered inline): the web console's log
@@ -121,6 +124,17 @@ class GatewayApp:
         nb.gateway_osd_data = drc.osd_data
         nb.on_authority_lost = lambda sn: drc.refresh_targets()
         drc.start()
+        requests = CloudRequests(gateway_sn=gw, registry=self.registry, outbox=outbox, clock=self.clock,
+                                 metrics=self.metrics)  # fmt: skip
+        wayline = self.wayline = WaylineService(
+            gateway_sn=gw,
+            devices=self.devices,
+            event=nb.event,
+            requests=requests,
+            clock=self.clock,
+            metrics=self.metrics,
+            require_authority=s.dispatcher.require_authority,
+        )
         # the will and the clean goodbye are the same: a topology with no sub-devices (all offline)
         offline = (topic(TopicKind.STATUS, gw), nb.topology(offline=True))
         bridge.set_will(*offline)
@@ -135,12 +149,15 @@ class GatewayApp:
             on_authority_change=self._authority_changed,
             on_events_reply=nb.events_reply,
             drc=drc,
+            wayline=wayline,
+            on_requests_reply=requests.answer,
         )
         self.drc.call_service = self.dispatcher.call_local  # drc_gimbal_reset runs as gimbal_reset
         for adapter in self.devices:
             await adapter.start(nb)
         bridge.start()
         periodic = loop.create_task(nb.run(self.stop_event), name="northbound")
+        waylines = loop.create_task(wayline.run(self.stop_event), name="wayline")
         consumer = loop.create_task(self._consume(), name="inbound")
         if s.metrics.enabled:
             self.observability = Observability(self, loop).start(s.metrics.host, s.metrics.port)
@@ -150,6 +167,7 @@ class GatewayApp:
             await self.stop_event.wait()
         finally:
             await self._shutdown(periodic, consumer, offline)
+            await waylines  # ends with stop_event
 
     def stop(self) -> None:
         self.stop_event.set()
@@ -183,6 +201,8 @@ class GatewayApp:
                 self.metrics.inc("drc_stop_failures_total", reason="shutdown", device="-")
                 log.exception("stopping live control failed; stopping every device directly")
         await asyncio.gather(*(a.stop_motion() for a in self.devices), return_exceptions=True)
+        if self.wayline is not None:
+            await self.wayline.stop()
         for adapter in self.devices:  # what the operator who pressed Ctrl-C needs to know
             log.info("%s", left_doing(adapter))
         consumer.cancel()

@@ -95,6 +95,15 @@ class LiveControl(Protocol):
     async def exit(self) -> tuple[int, dict[str, Any] | None]: ...
 
 
+class WaylineCalls(Protocol):
+    """What the dispatcher asks of wayline tasks (:class:`gateway.wayline.service.WaylineService`): the
+    services it answers, each as (result code, output)."""
+
+    methods: frozenset[str]
+
+    async def call(self, method: str, data: Any) -> tuple[int, dict[str, Any] | None]: ...
+
+
 @dataclass
 class _Cached:
     expires: float
@@ -116,6 +125,8 @@ class Dispatcher:
         on_authority_change: Callable[[], None] | None = None,
         on_events_reply: Callable[[str, int], None] | None = None,
         drc: LiveControl | None = None,
+        wayline: WaylineCalls | None = None,
+        on_requests_reply: Callable[[Any], None] | None = None,
     ) -> None:
         self.gateway_sn = gateway_sn
         self.registry = registry
@@ -127,6 +138,10 @@ class Dispatcher:
         self.on_authority_change = on_authority_change
         self.on_events_reply = on_events_reply
         self.drc = drc  # gateway.drc.DrcController (enter/exit), None: live control unavailable
+        #: gateway.wayline.service.WaylineService (flighttask_*, return_home*), None: no wayline tasks
+        self.wayline = wayline
+        #: told every valid requests_reply (gateway.cloud_requests.CloudRequests.answer)
+        self.on_requests_reply = on_requests_reply
         self._replies: OrderedDict[str, _Cached] = OrderedDict()
         self._pending = 0
         self._tasks: set[asyncio.Task[None]] = set()
@@ -301,6 +316,11 @@ class Dispatcher:
                 return await self._grab_authority(method, data)
             if method in _DRC_METHODS and self.drc is not None:
                 return await (self.drc.enter(data) if method == "drc_mode_enter" else self.drc.exit())
+            if self.wayline is not None and method in self.wayline.methods:
+                try:
+                    return await asyncio.wait_for(self.wayline.call(method, data), MAX_DEADLINE)
+                except TimeoutError:
+                    return ResultCode.DEVICE_TIMEOUT, {"reason": f"{method} did not finish in time"}
             adapter, problem = self._route(method, data)
             if adapter is None:
                 return problem
@@ -496,6 +516,8 @@ class Dispatcher:
             return
         if msg.data.result != 0:
             log.warning("cloud answered %s %s with result %s", kind.value, msg.method, msg.data.result)
+        if kind is TopicKind.REQUESTS_REPLY and self.on_requests_reply is not None:
+            self.on_requests_reply(msg)
 
 
 def _peek(pattern: re.Pattern[bytes], payload: bytes) -> str | None:

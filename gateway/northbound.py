@@ -119,8 +119,19 @@ class Northbound:
         if raw is not None:
             self.outbox.publish(topic(TopicKind.STATE, sn), raw, qos=1)
 
-    def event(self, sn: str, method: str, data: Mapping[str, Any], need_reply: bool = False) -> None:
+    def event(
+        self,
+        sn: str,
+        method: str,
+        data: Mapping[str, Any],
+        need_reply: bool = False,
+        *,
+        bid: str | None = None,
+    ) -> None:
+        """Publish one event (``bid``: the business id, e.g. a wayline's flight_id; else a fresh one)."""
         ids = self._ids()
+        if bid is not None:
+            ids["bid"] = bid
         try:
             msg = self.registry.build(
                 TopicKind.EVENTS,

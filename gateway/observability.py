@@ -88,6 +88,9 @@ HELP: dict[str, str] = {
     "by device and reason",
     "drc_drive_failures_total": "Live-control frames a device could not be sent, by device and reason",
     "services_stops_obeyed_total": "Stop services obeyed although their data could not be parsed, by method",
+    "requests_published_total": "Requests to the cloud published (flighttask_resource_get), by method",
+    "requests_unanswered_total": "Requests to the cloud given up after every re-send, by method",
+    "wayline_tasks_total": "Wayline tasks ended, by status (ok, failed, canceled, timeout)",
 }
 #: Per-link counters (``djigw_link_<name>_total{device, kind}``), read from the links and decoders.
 _LINK_COUNTERS = {

@@ -282,7 +282,7 @@ class FlighttaskResourceGet(OutboundModel):
 
 
 class ResourceOutput(InboundModel):
-    file: WaylineFile
+    file: WaylineFile | None = None  # absent when the cloud answers with an error
 
 
 class FlighttaskResourceGetReply(InboundModel):

@@ -63,6 +63,7 @@ from adapters.osdk.protocol import (
     SessionTable,
 )
 from adapters.osdk.telemetry import ITEMS as _TELEMETRY_ITEMS
+from adapters.osdk.wayline import OsdkWayline
 from adapters.serial_link import LinkError, SerialLink
 from adapters.supervision import SupervisedAdapter
 from adapters.wire.layout import LayoutError
@@ -124,6 +125,8 @@ class Task:
     offset: int = 0  # waypoints the gateway prepended: the cloud's index = mission index - offset
     finished: bool = False
     failed: int | None = None
+    #: told the mission index of every waypoint reached (wayline tasks: adapters/osdk/wayline.py)
+    on_reached: Callable[[int], None] | None = None
     path: list[tuple[float, float, float]] = field(default_factory=list)  # lat, lon, m above take-off
     speed: float = 0.0  # the mission's planned speed (m/s)
     planned: list[dict[str, float]] = field(default_factory=list)  # the cloud's points (WGS84 height)
@@ -170,6 +173,9 @@ class AircraftAdapter(SupervisedAdapter):
         self.telemetry = Telemetry()
         self.has_control = False
         self.mission: Task | None = None
+        #: where the aircraft last stood on the ground (latitude, longitude): the home of a wayline's RTH
+        self.home_position: tuple[float, float] | None = None
+        self.wayline = OsdkWayline(self)
         self._mission_task: asyncio.Task[None] | None = None
         self.unmatched_replies = 0  # ACKs after their deadline or for no request (metrics)
         self.handlers = {
@@ -476,6 +482,8 @@ class AircraftAdapter(SupervisedAdapter):
         if status is not None:
             t.flight = int(status["flight"])
             t.display_mode = int(status.get("display_mode", 0))
+        if t.flight is not None and not self.in_air and t.latitude is not None and t.longitude is not None:
+            self.home_position = (t.latitude, t.longitude)
         battery = f.get("battery")
         if battery is not None:
             t.battery_percent = int(battery["percentage"])
@@ -503,6 +511,8 @@ class AircraftAdapter(SupervisedAdapter):
             index = int(f["waypoint_index"])
             if index > task.reached:
                 task.reached = index
+                if task.on_reached is not None:
+                    task.on_reached(index)
                 if index >= task.offset:
                     self._progress(task, "wayline_progress", index - task.offset)
         elif incident == 1:  # mission finished
@@ -672,7 +682,7 @@ class AircraftAdapter(SupervisedAdapter):
     def _progress(
         self, task: Task, status: str, index: int, result: int = 0, *, need_reply: bool = True
     ) -> None:
-        if self._sink is None:
+        if self._sink is None or task.kind == "wayline":  # a wayline reports through gateway/wayline
             return
         index = max(0, index)
         if task.kind == "fly_to":

@@ -1,0 +1,211 @@
+"""Flying a planned wayline route on an Onboard SDK aircraft: take-off when on the ground (like a dock),
+upload and start each chained ground-station mission, follow its reached / finished / error pushes,
+change the cruise speed per segment, pause / resume / cancel, and the gateway's own return home.
+
+Owns the I/O half of a wayline on this family (the plan, sans-I/O, is ``wayline_plan.py``); uses the
+adapter's command path (``_gs``, ``_flight_task``) and its mission pushes (``Task``). Knows nothing of
+MQTT, downloads or Cloud API task states: it reports through the callbacks it is given.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from adapters.base import DeviceRejected, DeviceTimeout
+from adapters.osdk.wayline_plan import FcMission, Plan, PlanOptions, plan_route
+from adapters.wayline.kmz import Route
+from schemas.results import ResultCode
+
+if TYPE_CHECKING:
+    from adapters.osdk.adapter import AircraftAdapter, Task
+
+log = logging.getLogger(__name__)
+
+__all__ = ["MissionStopped", "OsdkWayline", "Reached"]
+
+AUTO_TAKEOFF = 11
+POLL = 0.05
+
+
+class MissionStopped(Exception):
+    """The mission ended short of its last waypoint without an FC error (cancelled, stop_motion)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Reached:
+    """A route waypoint done (its actions run): (wayline_id, index), and photos taken there."""
+
+    ref: tuple[int, int]
+    photos: int
+
+
+class OsdkWayline:
+    """The wayline runner of one :class:`~adapters.osdk.adapter.AircraftAdapter` (one route at a time)."""
+
+    def __init__(self, adapter: AircraftAdapter) -> None:
+        self.adapter = adapter
+        self.paused = False
+        self._task: Task | None = None
+
+    # -- planning --------------------------------------------------------------------------------
+    def plan(
+        self,
+        route: Route,
+        *,
+        rth_altitude: float | None = None,
+        exit_wayline_when_rc_lost: int | None = None,
+        break_point: tuple[int, int, int] | None = None,
+    ) -> Plan:
+        t = self.adapter.telemetry
+        if t.latitude is None or t.longitude is None:
+            raise DeviceRejected(ResultCode.BUSY, "no position from the aircraft yet")
+        home = self.home()
+        options = PlanOptions(
+            here=(t.latitude, t.longitude, t.height or 0.0),
+            in_air=self.adapter.in_air,
+            home=home,
+            home_altitude=t.home_altitude,
+            rth_altitude=rth_altitude,
+            exit_wayline_when_rc_lost=exit_wayline_when_rc_lost,
+            break_point=break_point,
+            vel_cmd_range=self.adapter.settings.mission_vel_cmd_range,
+        )
+        return plan_route(route, options)
+
+    def home(self) -> tuple[float, float]:
+        """Where the aircraft took off (its position when last on the ground)."""
+        t = self.adapter.telemetry
+        if self.adapter.home_position is not None:
+            return self.adapter.home_position
+        return (t.latitude or 0.0, t.longitude or 0.0)
+
+    # -- flying ----------------------------------------------------------------------------------
+    async def take_off(self, timeout: float) -> None:
+        """On the ground: the FC's take-off, then wait until airborne and the take-off has ended."""
+        a = self.adapter
+        if a.in_air:
+            return
+        await a._flight_task("takeoff")
+        deadline = a._now() + timeout
+        t = a.telemetry
+        while not (a.in_air and (t.height or 0.0) >= 1.0 and t.display_mode != AUTO_TAKEOFF):
+            if a._now() > deadline:
+                raise DeviceTimeout("the aircraft did not take off in time")
+            await asyncio.sleep(POLL)
+
+    async def fly(
+        self,
+        plan: Plan,
+        flight_id: str,
+        on_reached: Callable[[Reached], None],
+        on_entered: Callable[[], None],
+    ) -> None:
+        """Fly every mission of ``plan`` in order; returns when the last one finished. Raises
+        DeviceRejected (FC refused or reported a mission error, ``result``), DeviceTimeout, or
+        MissionStopped."""
+        from adapters.osdk.adapter import Task
+
+        for k, mission in enumerate(plan.missions):
+            await self._upload(mission)
+            task = Task("wayline", flight_id, len(mission.waypoints))
+            self._task = task
+            self.adapter.mission = task
+            speed = [float(mission.init["idle_vel"])]
+
+            def reached(index: int, mission: FcMission = mission, speed: list[float] = speed) -> None:
+                if index >= len(mission.points):
+                    return
+                ref = mission.points[index]
+                if ref is not None:
+                    on_reached(Reached(ref, mission.photos[index]))
+                want = mission.speeds[index]
+                if index + 1 < len(mission.points) and abs(want - speed[0]) > 1e-3:
+                    speed[0] = want
+                    asyncio.get_running_loop().create_task(self._set_speed(want))
+
+            task.on_reached = reached
+            await self.adapter._gs("wp_start_stop", {"start": 0})
+            if k == 0:
+                on_entered()
+            while not (task.finished or task.failed is not None):
+                await asyncio.sleep(POLL)
+            if task.failed is not None:
+                raise DeviceRejected(task.failed, "the flight controller reported a mission error")
+            if task.reached < len(mission.waypoints) - 1:
+                raise MissionStopped("the mission was stopped")
+
+    async def _set_speed(self, speed: float) -> None:
+        try:
+            await self.adapter._gs("wp_set_idle_velocity", {"idle_velocity": speed})
+        except Exception as exc:  # a missed speed change is logged; the mission goes on
+            log.warning("aircraft %s: segment speed %.1f m/s not set: %s", self.adapter.info.sn, speed, exc)
+
+    async def _upload(self, mission: FcMission) -> None:
+        a = self.adapter
+        await a._gs("wp_init", mission.init)
+        for wp in mission.waypoints:
+            ack = await a._gs("wp_upload", wp)
+            if int(ack.fields.get("index", wp["index"])) != wp["index"]:
+                raise DeviceRejected(
+                    ResultCode.BUSY, f"waypoint {wp['index']} acknowledged as {ack.fields.get('index')}"
+                )
+
+    async def pause(self) -> None:
+        await self.adapter._gs("wp_pause_resume", {"pause": 0})
+        self.paused = True
+
+    async def resume(self) -> None:
+        await self.adapter._gs("wp_pause_resume", {"pause": 1})
+        self.paused = False
+
+    async def cancel(self) -> None:
+        """Stop the mission: the FC brakes and hovers where it is."""
+        task = self._task
+        if task is not None and not task.finished:
+            task.finished = True
+        await self.adapter._gs("wp_start_stop", {"start": 1})
+
+    def return_home_plan(self, rth_altitude: float) -> list[tuple[float, float, float]]:
+        """The way home the gateway flies: up to ``rth_altitude`` over the aircraft, over home at that
+        height (then the FC lands): (latitude, longitude, height above take-off)."""
+        t = self.adapter.telemetry
+        here = (t.latitude or 0.0, t.longitude or 0.0)
+        h = max(rth_altitude, t.height or 0.0)
+        home = self.home()
+        return [(here[0], here[1], h), (home[0], home[1], h)]
+
+    async def return_home(self, path: list[tuple[float, float, float]], speed: float, flight_id: str) -> None:
+        """Fly ``path`` as a mission that lands at its end (action_on_finish 2); returns once started."""
+        from adapters.osdk.adapter import Task
+
+        a = self.adapter
+        init = {
+            "length": len(path),
+            "vel_cmd_range": a.settings.mission_vel_cmd_range,
+            "idle_vel": min(speed, a.settings.mission_vel_cmd_range),
+            "action_on_finish": 2,
+            "mission_exec_num": 1,
+            "yaw_mode": 0,
+            "trace_mode": 0,
+            "action_on_rc_lost": 0,
+            "gimbal_pitch_mode": 0,
+        }
+        await a._gs("wp_init", init)
+        for i, (lat, lon, alt) in enumerate(path):
+            wp = {"index": i, "latitude": math.radians(lat), "longitude": math.radians(lon), "altitude": alt,
+                  "action_time_limit": 100}  # fmt: skip
+            await a._gs("wp_upload", wp)
+        task = Task("wayline", flight_id, len(path))
+        self._task = task
+        a.mission = task
+        await a._gs("wp_start_stop", {"start": 0})
+
+    @property
+    def mission_running(self) -> bool:
+        task = self._task
+        return task is not None and not task.finished and task.failed is None

@@ -1,0 +1,492 @@
+"""The wayline service: the Cloud API's flighttask_* and return_home* services for the gateway's aircraft,
+their progress events, and the I/O around the sans-I/O :class:`~gateway.wayline.task.TaskBook`.
+
+Owns, on the event loop: the KMZ downloads (``fetch.py``), the ``flighttask_resource_get`` request before
+each run (a fresh URL, as docks ask; ``gateway/cloud_requests.py``), the check and parse
+(``adapters.wayline.kmz``), one run per executed task (the aircraft family's runner: an adapter with a
+``wayline`` attribute, ``adapters/osdk/wayline.py``), ``flighttask_progress`` (bid = flight_id, need_reply 1)
+on every change and each second while a task runs, ``flighttask_ready`` for conditional tasks,
+``return_home_info`` while returning, and the task time-outs. Knows nothing of paho or of bytes on a link.
+
+Choices where WAYLINE-NOTES is silent (a DJI dock's behaviour where known):
+
+* ``flighttask_prepare`` downloads and checks the file at once and waits for it up to
+  :data:`PREPARE_WAIT` s: a wrong fingerprint, a bad file or a route the aircraft cannot fly is the
+  prepare's non-zero result (nothing is uploaded, nothing moves); a slower download goes on and a failure
+  then fails the execute. ``flighttask_execute`` answers at once and the run reports by progress events.
+* Before each run the gateway asks ``flighttask_resource_get``; an answer with a file is downloaded
+  unless it has the fingerprint already verified; no answer (or an error) falls back to the prepared file.
+* ``return_home`` ends a running task ``canceled`` (break reason 1283 "user RTH") and flies the gateway's
+  own way home: up to the RTH height over the aircraft, over home at that height, land. The RTH height is
+  the last task's ``rth_altitude``, else its KMZ's ``globalRTHHeight``, else :data:`DEFAULT_RTH_ALTITUDE`.
+  ``return_home_cancel`` stops that mission: the aircraft hovers (as a dock's aircraft does, §3.5).
+* ``out_of_control_action`` 1 (hover) and 2 (land) are refused (325001): an Onboard SDK FC's lost-link
+  failsafe is set in DJI Assistant 2, not by the open protocol; 0 (return home) is its default.
+* ``ready_conditions`` of a conditional task (``task_type`` 2) are checked every second: battery above
+  ``battery_capacity`` and now within [begin_time, end_time]; the first time they all hold,
+  ``flighttask_ready`` names the task. ``executable_conditions.storage_capacity`` cannot be checked on an
+  Onboard SDK FC (it reports no storage): accepted and logged as not checked.
+* ``wayline_precision_type``, ``rth_mode``, ``flight_safety_advance_check`` and ``simulate_mission`` have no
+  counterpart on the FC: accepted and logged as ignored (``rth_mode`` 1 preset height is what is flown).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import Any
+
+from adapters.base import Adapter, DeviceNotConnected, DeviceRejected, DeviceTimeout
+from adapters.osdk.wayline import MissionStopped, Reached
+from adapters.osdk.wayline_plan import RouteRefused
+from adapters.wayline.kmz import FILE_FORMAT, KmzError, Route, check_fingerprint, parse_wpml, unpack_wpml
+from gateway.clock import Clock
+from gateway.cloud_requests import CloudRequestError, CloudRequests
+from gateway.devices import DeviceTable
+from gateway.metrics import Metrics
+from gateway.wayline.fetch import FetchError, fetch_kmz
+from gateway.wayline.task import (
+    STEP_DOWNLOAD,
+    STEP_TAKEOFF,
+    STEP_TRIGGER,
+    STEP_UPLOAD,
+    STEP_URL,
+    Phase,
+    TaskBook,
+    WaylineTask,
+)
+from schemas.results import ResultCode
+
+log = logging.getLogger(__name__)
+
+__all__ = ["DEFAULT_RTH_ALTITUDE", "PREPARE_WAIT", "WaylineService"]
+
+PREPARE_WAIT = 2.0
+DEFAULT_RTH_ALTITUDE = 100.0
+TAKEOFF_TIMEOUT = 30.0
+RTH_SPEED = 10.0
+PROGRESS_PERIOD = 1.0
+_UNOBTAINABLE = int(ResultCode.WAYLINE_FILE_UNOBTAINABLE)
+METHODS = frozenset(
+    {
+        "flighttask_prepare",
+        "flighttask_execute",
+        "flighttask_undo",
+        "flighttask_pause",
+        "flighttask_recovery",
+        "return_home",
+        "return_home_cancel",
+    }
+)
+#: Services that move the aircraft: flight authority first when the dispatcher requires it.
+_MOVING = frozenset({"flighttask_execute", "flighttask_recovery", "return_home", "return_home_cancel"})
+
+Result = tuple[int, dict[str, Any] | None]
+
+
+@dataclass
+class _File:
+    fingerprint: str
+    route: Route
+
+
+class WaylineService:
+    methods = METHODS
+
+    def __init__(
+        self,
+        *,
+        gateway_sn: str,
+        devices: DeviceTable,
+        event: Callable[..., None],
+        requests: CloudRequests,
+        clock: Clock,
+        metrics: Metrics,
+        require_authority: bool,
+        fetch: Callable[[str], Awaitable[bytes]] = fetch_kmz,
+    ) -> None:
+        self.gateway_sn = gateway_sn
+        self.devices = devices
+        self._event = event  # Northbound.event
+        self.requests = requests
+        self.clock = clock
+        self.metrics = metrics
+        self.require_authority = require_authority
+        self.fetch = fetch
+        self.book = TaskBook()
+        self._files: dict[str, asyncio.Task[_File]] = {}
+        self._runs: dict[str, asyncio.Task[None]] = {}
+        self._ready_sent: set[str] = set()
+        self._rth: dict[str, Any] | None = None  # the way home being flown: path, flight_id
+        self._last_rth_altitude = DEFAULT_RTH_ALTITUDE
+
+    # -- the aircraft ----------------------------------------------------------------------------
+    def _aircraft(self) -> Adapter | None:
+        for adapter in self.devices:
+            if getattr(adapter, "wayline", None) is not None:
+                return adapter
+        return None
+
+    # -- services --------------------------------------------------------------------------------
+    async def call(self, method: str, data: Any) -> Result:
+        aircraft = self._aircraft()
+        if aircraft is None:
+            return ResultCode.METHOD_NOT_SUPPORTED, {"reason": "no aircraft here flies waylines"}
+        if (
+            method in _MOVING
+            and self.require_authority
+            and aircraft.info.sn not in self.devices.authority.flight
+        ):
+            return ResultCode.NO_FLIGHT_AUTHORITY, {"reason": "grab flight authority first"}
+        handler = getattr(self, "_" + method)
+        result: Result = await handler(aircraft, data)
+        return result
+
+    async def _flighttask_prepare(self, aircraft: Any, data: Any) -> Result:
+        if data.out_of_control_action is not None and data.out_of_control_action != 0:
+            return ResultCode.INVALID_PARAMETERS, {
+                "reason": "out_of_control_action: only 0 (return home), the FC's own failsafe"
+            }
+        if data.task_type == 2 and data.ready_conditions is None:
+            return ResultCode.INVALID_PARAMETERS, {"reason": "a conditional task needs ready_conditions"}
+        task, new = self.book.prepare(data, self.clock.monotonic())
+        if new:
+            self._log_ignored(data)
+            self._files[task.flight_id] = asyncio.get_running_loop().create_task(
+                self._load(aircraft, data.file.url, data.file.fingerprint, data), name=f"kmz-{task.flight_id}"
+            )
+        if task.phase is Phase.DONE and task.started_at is None and task.status == "failed":
+            return task.result, {"reason": task.reason}
+        file = self._files.get(task.flight_id)
+        if file is not None:
+            await asyncio.wait({file}, timeout=PREPARE_WAIT)
+            if file.done() and (file.cancelled() or file.exception() is not None):
+                code, reason = _failure(None if file.cancelled() else file.exception())
+                self.book.failed(task, code, reason, None)
+                return code, {"reason": reason}
+        return ResultCode.SUCCESS, None
+
+    async def _load(self, aircraft: Any, url: str, fingerprint: str, prepare: Any) -> _File:
+        """Download, check and parse; a trial plan from where the aircraft is now refuses what it cannot
+        fly before anything is uploaded."""
+        if not fingerprint.strip():
+            raise KmzError(int(ResultCode.WAYLINE_MD5_EMPTY), "the task's fingerprint (MD5) is empty")
+        try:
+            kmz = await self.fetch(url)
+        except FetchError as exc:
+            raise KmzError(_UNOBTAINABLE, str(exc)) from None
+        digest = check_fingerprint(kmz, fingerprint)
+        route = parse_wpml(unpack_wpml(kmz))
+        if aircraft.telemetry.latitude is not None:
+            self._plan(aircraft, route, prepare)
+        return _File(digest, route)
+
+    def _plan(self, aircraft: Any, route: Route, prepare: Any) -> Any:
+        bp = prepare.break_point
+        return aircraft.wayline.plan(
+            route,
+            rth_altitude=prepare.rth_altitude,
+            exit_wayline_when_rc_lost=prepare.exit_wayline_when_rc_lost,
+            break_point=(bp.wayline_id, bp.index, int(bp.state)) if bp is not None else None,
+        )
+
+    def _log_ignored(self, data: Any) -> None:
+        ignored = [
+            name
+            for name in (
+                "wayline_precision_type",
+                "rth_mode",
+                "flight_safety_advance_check",
+                "simulate_mission",
+            )
+            if getattr(data, name) is not None
+        ]
+        if ignored:
+            log.info("wayline task %s: %s have no counterpart on this FC (ignored)", data.flight_id, ignored)
+        if data.executable_conditions is not None:
+            log.info("wayline task %s: storage_capacity cannot be checked on this FC", data.flight_id)
+
+    async def _flighttask_execute(self, aircraft: Any, data: Any) -> Result:
+        task = self.book.get(data.flight_id)
+        if task is not None and task.phase is Phase.PREPARED:
+            file = self._files.get(task.flight_id)
+            if file is not None and file.done() and file.exception() is not None:
+                code, reason = _failure(None if file.cancelled() else file.exception())
+                self.book.failed(task, code, reason, None)
+        verdict, start = self.book.execute(data.flight_id, self.clock.monotonic())
+        if start:
+            assert task is not None
+            self._emit(task)
+            self._runs[task.flight_id] = asyncio.get_running_loop().create_task(
+                self._run(aircraft, task), name=f"wayline-{task.flight_id}"
+            )
+        return verdict.result, ({"reason": verdict.reason} if verdict.reason else None)
+
+    async def _flighttask_undo(self, aircraft: Any, data: Any) -> Result:
+        verdict = self.book.undo(list(data.flight_ids))
+        if verdict.ok:
+            for f in data.flight_ids:
+                if self.book.get(f) is None:
+                    file = self._files.pop(f, None)
+                    if file is not None:
+                        file.cancel()
+        return verdict.result, ({"reason": verdict.reason} if verdict.reason else None)
+
+    async def _flighttask_pause(self, aircraft: Any, data: Any) -> Result:
+        verdict, task = self.book.pause()
+        if task is None:
+            return verdict.result, {"reason": verdict.reason}
+        try:
+            await aircraft.wayline.pause()
+        except (DeviceRejected, DeviceTimeout, DeviceNotConnected) as exc:
+            return ResultCode.WAYLINE_PAUSE_FAILED, {"reason": str(exc)[:300]}
+        self.book.paused(task)
+        self._emit(task)
+        return ResultCode.SUCCESS, None
+
+    async def _flighttask_recovery(self, aircraft: Any, data: Any) -> Result:
+        verdict, task = self.book.recovery()
+        if task is None:
+            return verdict.result, {"reason": verdict.reason}
+        try:
+            await aircraft.wayline.resume()
+        except (DeviceRejected, DeviceTimeout, DeviceNotConnected) as exc:
+            return ResultCode.WAYLINE_RESUME_FAILED, {"reason": str(exc)[:300]}
+        self.book.resumed(task)
+        self._emit(task)
+        return ResultCode.SUCCESS, None
+
+    async def _return_home(self, aircraft: Any, data: Any) -> Result:
+        if not aircraft.in_air:
+            return ResultCode.BUSY, {"reason": "the aircraft is on the ground"}
+        task = self.book.active
+        flight_id = ""
+        if task is not None:
+            flight_id = task.flight_id
+            await self._stop_task(aircraft, task, "canceled", break_reason=1283)
+        runner = aircraft.wayline
+        path = runner.return_home_plan(self._last_rth_altitude)
+        try:
+            await runner.return_home(path, RTH_SPEED, flight_id or "return-home")
+        except (DeviceRejected, DeviceTimeout, DeviceNotConnected) as exc:
+            return ResultCode.BUSY, {"reason": f"return home refused: {str(exc)[:200]}"}
+        self._rth = {"path": path, "flight_id": flight_id, "home_altitude": aircraft.telemetry.home_altitude}
+        self._emit_rth()
+        return ResultCode.SUCCESS, None
+
+    async def _return_home_cancel(self, aircraft: Any, data: Any) -> Result:
+        if self._rth is None or not aircraft.wayline.mission_running:
+            self._rth = None
+            return ResultCode.BUSY, {"reason": "the aircraft is not returning home"}
+        try:
+            await aircraft.wayline.cancel()
+        except (DeviceRejected, DeviceTimeout, DeviceNotConnected) as exc:
+            return ResultCode.BUSY, {"reason": str(exc)[:300]}
+        self._rth = None
+        return ResultCode.SUCCESS, None
+
+    # -- a run -----------------------------------------------------------------------------------
+    async def _run(self, aircraft: Any, task: WaylineTask) -> None:
+        book, runner, req = self.book, aircraft.wayline, task.request
+        if req.rth_altitude is not None:
+            self._last_rth_altitude = float(req.rth_altitude)
+        try:
+            book.step(task, STEP_URL, 2)
+            self._emit(task)
+            file = await self._fresh_file(aircraft, task)
+            if file.route.config.global_rth_height and req.rth_altitude is None:
+                self._last_rth_altitude = file.route.config.global_rth_height
+            plan = self._plan(aircraft, file.route, req)
+            for note in plan.skipped:
+                log.warning("wayline task %s: skipped %s", task.flight_id, note)
+            book.planned(task, plan.route_points)
+            book.step(task, STEP_UPLOAD, 8)
+            self._emit(task)
+            if not aircraft.in_air:
+                book.step(task, STEP_TAKEOFF, 9)
+                self._emit(task)
+                await runner.take_off(TAKEOFF_TIMEOUT)
+            book.step(task, STEP_TRIGGER, 10)
+            self._emit(task)
+
+            def reached(r: Reached) -> None:
+                if task.phase is Phase.DONE:
+                    return
+                book.reached(task, r.ref[0], r.ref[1], r.photos)
+                self._emit(task)
+
+            def entered() -> None:
+                book.entered(task)
+                self._emit(task)
+
+            await runner.fly(plan, task.flight_id, reached, entered)
+            if task.phase is not Phase.DONE:
+                book.finished(task)
+        except (KmzError, RouteRefused) as exc:
+            code, reason = _failure(exc)
+            br = getattr(exc, "break_reason", 0)
+            book.failed(task, code, reason, self._break_point(aircraft, task, br) if br else None)
+        except DeviceRejected as exc:
+            book.failed(task, int(exc.result), str(exc)[:300], self._break_point(aircraft, task, 1564))
+        except (DeviceTimeout, DeviceNotConnected) as exc:
+            code = (
+                ResultCode.DEVICE_NOT_CONNECTED
+                if isinstance(exc, DeviceNotConnected)
+                else ResultCode.DEVICE_TIMEOUT
+            )
+            book.failed(task, int(code), str(exc)[:300], self._break_point(aircraft, task, 2))
+        except MissionStopped:
+            if task.phase is not Phase.DONE:
+                book.stopped(task, "canceled", self._break_point(aircraft, task, 1281))
+        except asyncio.CancelledError:
+            if task.phase is not Phase.DONE:
+                book.stopped(task, "canceled", self._break_point(aircraft, task, 1281))
+        except Exception:
+            log.exception("wayline task %s failed", task.flight_id)
+            book.failed(task, int(ResultCode.INTERNAL_ERROR), "internal error in the gateway", None)
+        finally:
+            self._runs.pop(task.flight_id, None)
+            self.metrics.inc("wayline_tasks_total", status=task.status)
+            log.info("wayline task %s ended %s (%s)", task.flight_id, task.status, task.result)
+            self._emit(task)
+
+    async def _fresh_file(self, aircraft: Any, task: WaylineTask) -> _File:
+        """The route to fly: a fresh URL from the cloud (flighttask_resource_get) when it gives one,
+        downloaded unless that fingerprint is already verified; else the prepared file."""
+        req = task.request
+        url, fingerprint = req.file.url, req.file.fingerprint
+        try:
+            answer = await self.requests.request(
+                "flighttask_resource_get", {"flight_id": task.flight_id}, bid=task.flight_id
+            )
+        except CloudRequestError as exc:
+            log.warning("wayline task %s: %s; using the prepared file URL", task.flight_id, exc)
+        else:
+            if answer.result == 0 and answer.output is not None and answer.output.file is not None:
+                url, fingerprint = answer.output.file.url, answer.output.file.fingerprint
+            else:
+                log.warning(
+                    "wayline task %s: flighttask_resource_get answered %s", task.flight_id, answer.result
+                )
+        self.book.step(task, STEP_DOWNLOAD, 5)
+        self._emit(task)
+        prepared = self._files.get(task.flight_id)
+        if prepared is not None:
+            with contextlib.suppress(Exception):
+                known = await asyncio.shield(prepared)
+                if known.fingerprint == fingerprint.strip().lower():
+                    return known
+        file = await self._load(aircraft, url, fingerprint, req)
+        return file
+
+    async def _stop_task(self, aircraft: Any, task: WaylineTask, status: str, *, break_reason: int) -> None:
+        self.book.stopped(task, status, self._break_point(aircraft, task, break_reason))
+        if aircraft.wayline.mission_running:
+            with contextlib.suppress(DeviceRejected, DeviceTimeout, DeviceNotConnected):
+                await aircraft.wayline.cancel()
+        run = self._runs.get(task.flight_id)
+        if run is not None and not run.done():
+            run.cancel()
+        self._emit(task)
+
+    def _break_point(self, aircraft: Any, task: WaylineTask, reason: int) -> dict[str, Any] | None:
+        t = aircraft.telemetry
+        if t.latitude is None or t.longitude is None:
+            return None
+        yaw = t.attitude[2] if t.attitude is not None else 0.0
+        return {
+            "index": task.waypoint_index,
+            "state": 0,
+            "progress": 0.0,
+            "wayline_id": 0 if task.wayline_id == 65535 else task.wayline_id,
+            "break_reason": reason,
+            "latitude": max(-90.0, min(90.0, t.latitude)),
+            "longitude": max(-180.0, min(180.0, t.longitude)),
+            "height": float(t.altitude or 0.0),
+            "attitude_head": max(-180.0, min(180.0, yaw)),
+        }
+
+    # -- reports ---------------------------------------------------------------------------------
+    def _emit(self, task: WaylineTask) -> None:
+        self._event(
+            self.gateway_sn, "flighttask_progress", self.book.progress(task), True, bid=task.flight_id
+        )
+
+    def _emit_rth(self) -> None:
+        rth = self._rth
+        if rth is None:
+            return
+        base = rth["home_altitude"] or 0.0
+        points = [
+            {"latitude": lat, "longitude": lon, "height": round(base + h, 1)} for lat, lon, h in rth["path"]
+        ]
+        data = {"planned_path_points": points, "last_point_type": 0, "flight_id": rth["flight_id"]}
+        self._event(self.gateway_sn, "return_home_info", data, False)
+
+    def tick(self) -> None:
+        """Once a second: progress of the running task, the way home, time-outs, conditional tasks."""
+        now = self.clock.monotonic()
+        task = self.book.active
+        if task is not None:
+            self._emit(task)
+        aircraft = self._aircraft()
+        if self._rth is not None:
+            if aircraft is not None and aircraft.wayline.mission_running:
+                self._emit_rth()
+            else:
+                self._rth = None
+        for late in self.book.expired(now):
+            if aircraft is not None:
+                asyncio.get_running_loop().create_task(
+                    self._stop_task(aircraft, late, "timeout", break_reason=2)
+                )
+        ready = [f for f, t in self.book.tasks.items() if self._ready(aircraft, t)]
+        if ready:
+            self._ready_sent.update(ready)
+            self._event(self.gateway_sn, "flighttask_ready", {"flight_ids": ready}, True)
+
+    def _ready(self, aircraft: Any, task: WaylineTask) -> bool:
+        req = task.request
+        if task.phase is not Phase.PREPARED or req.task_type != 2 or task.flight_id in self._ready_sent:
+            return False
+        cond = req.ready_conditions
+        if cond is None or aircraft is None:
+            return False
+        battery = aircraft.telemetry.battery_percent
+        now_ms = self.clock.time_ms()
+        return (
+            battery is not None
+            and battery > cond.battery_capacity
+            and cond.begin_time <= now_ms <= cond.end_time
+        )
+
+    async def run(self, stop: asyncio.Event) -> None:
+        while not stop.is_set():
+            try:
+                self.tick()
+            except Exception:
+                self.metrics.inc("handler_exceptions_total", where="wayline")
+                log.exception("wayline tick failed")
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), PROGRESS_PERIOD)
+
+    async def stop(self) -> None:
+        for run in list(self._runs.values()):
+            run.cancel()
+        for file in self._files.values():
+            file.cancel()
+
+
+def _failure(exc: BaseException | None) -> tuple[int, str]:
+    if isinstance(exc, RouteRefused):
+        return exc.code, f"{exc.reason} (break reason {exc.break_reason})"
+    if isinstance(exc, KmzError):
+        return exc.code, exc.reason
+    if isinstance(exc, DeviceRejected):
+        return int(exc.result), str(exc)[:300]
+    if isinstance(exc, asyncio.CancelledError):
+        return _UNOBTAINABLE, "the download was cancelled"
+    return FILE_FORMAT, f"the file could not be checked: {type(exc).__name__}"

@@ -1,0 +1,275 @@
+"""Wayline tasks end to end: the cloud (a paho client on a real mosquitto) prepares and executes a KMZ
+served by a plain HTTP server on 127.0.0.1; the gateway downloads it, asks flighttask_resource_get,
+checks the fingerprint, plans, and flies it on the simulated flight controller over a real pty."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any
+
+import paho.mqtt.client as paho
+import pytest
+from paho.mqtt.enums import CallbackAPIVersion
+
+from adapters.osdk.sim import OsdkFcDevice, OsdkFcModel
+from adapters.simio import PtyEndpoint
+from adapters.wayline.writer import ActionSpec, PointSpec, kmz_bytes, md5_hex, waylines_wpml
+from gateway.local_broker import LocalBroker
+from gateway.mqtt import close_client
+from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
+
+pytestmark = pytest.mark.broker
+
+GW = "GW-TEST-1"
+SN = "OSDK-W-1"
+HOME = (22.5431, 113.958)
+HOME_ALT = 50.0
+
+
+def _ne(north: float, east: float) -> tuple[float, float]:
+    lat = HOME[0] + math.degrees(north / 6_378_137.0)
+    lon = HOME[1] + math.degrees(east / (6_378_137.0 * math.cos(math.radians(HOME[0]))))
+    return lat, lon
+
+
+def _distance(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
+    n = math.radians(lat2 - lat1) * 6_378_137.0
+    e = math.radians(lon2 - lon1) * 6_378_137.0 * math.cos(math.radians(lat1))
+    return math.hypot(n, e)
+
+
+class FileStore:
+    """A plain HTTP file server on 127.0.0.1 (object storage where expiry does not matter)."""
+
+    def __init__(self) -> None:
+        self.files: dict[str, bytes] = {}
+        self.gets: list[str] = []
+        store = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_GET(self) -> None:
+                path = self.path.split("?")[0]
+                store.gets.append(path)
+                body = store.files.get(path)
+                if body is None:
+                    self.send_response(404)
+                    self.end_headers()
+                    return
+                self.send_response(200)
+                self.send_header("Content-Length", str(len(body)))
+                self.end_headers()
+                self.wfile.write(body)
+
+            def log_message(self, *args: Any) -> None:
+                pass
+
+        self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
+        self.thread.start()
+
+    def put(self, name: str, data: bytes) -> str:
+        self.files[f"/{name}"] = data
+        return f"http://127.0.0.1:{self.server.server_port}/{name}?X-Amz-Expires=3600&X-Amz-Signature=abc"
+
+    def close(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+
+
+class ResourceAnswerer:
+    """The cloud's answer to flighttask_resource_get: a fresh URL and the stored fingerprint."""
+
+    def __init__(self, broker: LocalBroker, files: dict[str, tuple[str, str]]) -> None:
+        self.files = files
+        self.asked: list[dict[str, Any]] = []
+        self.client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"res-{uuid.uuid4().hex[:8]}")
+        self.client.on_message = self._on_message
+        self.client.connect(broker.host, broker.port)
+        self.client.loop_start()
+        self.client.subscribe(f"thing/product/{GW}/requests", 1)
+
+    def _on_message(self, client: paho.Client, userdata: Any, msg: paho.MQTTMessage) -> None:
+        body = json.loads(msg.payload)
+        self.asked.append(body)
+        url, fingerprint = self.files[body["data"]["flight_id"]]
+        answer = {"result": 0, "output": {"file": {"url": url, "fingerprint": fingerprint}}}
+        reply = {"tid": body["tid"], "bid": body["bid"], "timestamp": int(time.time() * 1000),
+                 "method": body["method"], "data": answer}  # fmt: skip
+        client.publish(msg.topic + "_reply", json.dumps(reply), qos=1)
+
+    def close(self) -> None:
+        self.client.disconnect()
+        self.client.loop_stop()
+        close_client(self.client)
+
+
+@pytest.fixture
+def rig(broker: LocalBroker) -> Iterator[dict[str, Any]]:
+    device = OsdkFcDevice(OsdkFcModel(home=HOME, home_altitude=HOME_ALT))
+    pty = PtyEndpoint(device).start()
+    settings = gateway_settings(
+        broker.port, [{"type": "osdk", "sn": SN, "url": pty.path, "app_id": 1234}], gateway_sn=GW
+    )
+    store = FileStore()
+    files: dict[str, tuple[str, str]] = {}
+    answerer = ResourceAnswerer(broker, files)
+    cloud = CloudClient(broker.host, broker.port, GW)
+    gw = GatewayThread(settings).start()
+    try:
+        cloud.wait_for("status", lambda b: [d["sn"] for d in b["data"]["sub_devices"]] == [SN], timeout=10)
+        cloud.wait_for(f"{SN}/osd", lambda b: "latitude" in b["data"])
+        assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
+        yield {"fc": device, "cloud": cloud, "gw": gw, "store": store, "files": files, "answerer": answerer}
+    finally:
+        gw.stop()
+        cloud.close()
+        answerer.close()
+        store.close()
+        pty.stop()
+
+
+POINTS = [(0.0, 0.0), (40.0, 0.0), (40.0, 40.0)]  # north, east (m) from home
+
+
+def _route_kmz(height: float = 25.0, **kw: Any) -> tuple[bytes, list[tuple[float, float]]]:
+    coords = [_ne(n, e) for n, e in POINTS]
+    pts = [PointSpec(*coords[0], height), PointSpec(*coords[1], height, actions=[
+        ActionSpec("gimbalRotate", {"gimbalRotateMode": "absoluteAngle", "gimbalPitchRotateEnable": 1,
+                                    "gimbalPitchRotateAngle": -45}),
+        ActionSpec("takePhoto", {"fileSuffix": "wp1", "payloadPositionIndex": 0})]),
+        PointSpec(*coords[2], height)]  # fmt: skip
+    return kmz_bytes(waylines_wpml(pts, speed=8.0, **kw)), coords
+
+
+def _prepare(
+    rig: dict[str, Any], flight_id: str, kmz: bytes, fingerprint: str | None = None
+) -> dict[str, Any]:
+    url = rig["store"].put(f"{flight_id}.kmz", kmz)
+    fp = md5_hex(kmz) if fingerprint is None else fingerprint
+    rig["files"][flight_id] = (url, fp)
+    data = {"flight_id": flight_id, "execute_time": int(time.time() * 1000), "task_type": 0,
+            "wayline_type": 0, "file": {"url": url, "fingerprint": fp}, "rth_altitude": 40, "rth_mode": 1,
+            "out_of_control_action": 0, "exit_wayline_when_rc_lost": 1,
+            "wayline_precision_type": 0}  # fmt: skip
+    return rig["cloud"].service("flighttask_prepare", data)
+
+
+def _progress(cloud: CloudClient, flight_id: str) -> list[dict[str, Any]]:
+    return [
+        b
+        for b in cloud.find("/events", lambda b: b.get("method") == "flighttask_progress")
+        if b["data"]["output"]["ext"]["flight_id"] == flight_id
+    ]
+
+
+def _status(cloud: CloudClient, flight_id: str) -> list[str]:
+    return [b["data"]["output"]["status"] for b in _progress(cloud, flight_id)]
+
+
+def test_three_waypoint_route_flies_and_ends_ok(rig: dict[str, Any]) -> None:
+    cloud, fc = rig["cloud"], rig["fc"]
+    kmz, _ = _route_kmz()
+    flight = str(uuid.uuid4())
+    assert _prepare(rig, flight, kmz)["data"]["result"] == 0
+    # the reference cloud resends with a new tid: the same answer, nothing new
+    assert _prepare(rig, flight, kmz)["data"]["result"] == 0
+    assert cloud.service("flighttask_execute", {"flight_id": flight})["data"]["result"] == 0
+    assert cloud.service("flighttask_execute", {"flight_id": flight})["data"]["result"] == 0  # idempotent
+
+    # flown within 5 m of every waypoint, at the planned height
+    visited = [False] * 3
+
+    def track() -> bool:
+        n, e, h = fc.inspect(lambda m: (m.n, m.e, m.u))  # local metres from home
+        for i, (pn, pe) in enumerate(POINTS):
+            if math.dist((n, e, h), (pn, pe, 25.0)) < 5.0:
+                visited[i] = True
+        return "ok" in _status(cloud, flight) or "failed" in _status(cloud, flight)
+
+    wait_until(track, 90, what="route flown", interval=0.05)
+    assert visited == [True, True, True], visited
+    statuses = _status(cloud, flight)
+    assert statuses[-1] == "ok", statuses
+    events = _progress(cloud, flight)
+    assert all(e["bid"] == flight and e["need_reply"] == 1 for e in events)
+    assert statuses[0] == "sent" and "in_progress" in statuses
+    final = events[-1]["data"]
+    assert final["result"] == 0 and final["output"]["progress"]["percent"] == 100
+    ext = final["output"]["ext"]
+    assert ext["media_count"] == 1 and ext["current_waypoint_index"] == 3 and ext["wayline_id"] == 0
+    # the simulated FC ran the actions: one photo, gimbal pitch at -45°
+    assert fc.inspect(lambda m: m.photos) == 1
+    assert fc.inspect(lambda m: m.gimbal_pitch) == -45.0
+    # a fresh URL was asked for before the run (flighttask_resource_get on requests, bid = flight_id)
+    asked = [a for a in rig["answerer"].asked if a["method"] == "flighttask_resource_get"]
+    assert asked and asked[0]["data"] == {"flight_id": flight} and asked[0]["bid"] == flight
+    # progress at >= 1 Hz while flying: no gap longer than 1.5 s between in_progress events
+    stamps = [e["timestamp"] for e in events if e["data"]["output"]["status"] == "in_progress"]
+    assert max(b - a for a, b in itertools.pairwise(stamps)) <= 1500
+
+
+def test_wrong_fingerprint_fails_and_nothing_moves(rig: dict[str, Any]) -> None:
+    cloud, fc = rig["cloud"], rig["fc"]
+    kmz, _ = _route_kmz()
+    flight = str(uuid.uuid4())
+    reply = _prepare(rig, flight, kmz, fingerprint="0" * 32)
+    assert reply["data"]["result"] == 314005, reply
+    assert "MD5" in reply["data"]["output"]["reason"]
+    r = cloud.service("flighttask_execute", {"flight_id": flight})
+    assert r["data"]["result"] == 314005
+    time.sleep(1.0)
+    assert fc.inspect(lambda m: (m.in_air, m.motors_on, m.speed)) == (False, False, 0.0)
+    assert fc.inspect(lambda m: m.upload) is None  # nothing was uploaded to the FC
+
+
+def test_pause_holds_and_recovery_finishes(rig: dict[str, Any]) -> None:
+    cloud, fc = rig["cloud"], rig["fc"]
+    kmz, _ = _route_kmz()
+    flight = str(uuid.uuid4())
+    assert _prepare(rig, flight, kmz)["data"]["result"] == 0
+    assert cloud.service("flighttask_execute", {"flight_id": flight})["data"]["result"] == 0
+    # wait until it flies between waypoints 0 and 1 at speed
+    wait_until(
+        lambda: (
+            any(e["data"]["output"]["ext"]["current_waypoint_index"] >= 1 for e in _progress(cloud, flight))
+            and fc.inspect(lambda m: m.speed) > 3.0
+        ),
+        60,
+        what="flying the route",
+    )
+    assert cloud.service("flighttask_pause", None)["data"]["result"] == 0
+    paused_at = time.monotonic()
+    wait_until(lambda: math.hypot(*fc.inspect(lambda m: (m.vn, m.ve))) < 0.5, 3.0, what="holding")
+    assert time.monotonic() - paused_at < 3.0
+    wait_until(lambda: "paused" in _status(cloud, flight), 3, what="progress says paused")
+    time.sleep(1.5)
+    assert math.hypot(*fc.inspect(lambda m: (m.vn, m.ve))) < 0.5  # still holding
+    assert _status(cloud, flight)[-1] == "paused"
+    # pause again: not running
+    assert cloud.service("flighttask_pause", None)["data"]["result"] == 319046
+    assert cloud.service("flighttask_recovery", None)["data"]["result"] == 0
+    wait_until(lambda: _status(cloud, flight)[-1] == "ok", 90, what="finished after recovery")
+    assert cloud.service("flighttask_recovery", None)["data"]["result"] == 319044
+
+
+def test_undo_and_unknown_tasks(rig: dict[str, Any]) -> None:
+    cloud = rig["cloud"]
+    kmz, _ = _route_kmz()
+    flight = str(uuid.uuid4())
+    assert _prepare(rig, flight, kmz)["data"]["result"] == 0
+    assert cloud.service("flighttask_undo", {"flight_ids": [flight]})["data"]["result"] == 0
+    assert cloud.service("flighttask_execute", {"flight_id": flight})["data"]["result"] == 319003
+
+
+def test_unflyable_route_is_refused_at_prepare(rig: dict[str, Any]) -> None:
+    kmz, _ = _route_kmz(height_mode="realTimeFollowSurface")
+    reply = _prepare(rig, str(uuid.uuid4()), kmz)
+    assert reply["data"]["result"] == 314003
+    assert "1541" in reply["data"]["output"]["reason"]
