@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from gateway import codec_cli, config_cli, console, contract_cli, fly, run_cli, status_cli
+from gateway.wayline import console_files as wayline_console
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -28,6 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
     status_cli.add_parsers(sub)
     config_cli.add_parsers(sub)
     codec_cli.add_parsers(sub)
+    wayline_console.add_parsers(sub)
 
     schema = sub.add_parser("schema", help="Cloud API contract tools")
     schema_sub = schema.add_subparsers(dest="schema_command", required=True)

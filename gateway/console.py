@@ -183,6 +183,20 @@ def parse_fields(pairs: list[str]) -> dict[str, Any]:
     return out
 
 
+def _progress_text(data: dict[str, Any]) -> str:
+    """A wayline task's progress in one line: flight_id status step percent waypoint media (result)."""
+    out = data.get("output") if isinstance(data.get("output"), dict) else {}
+    ext = out.get("ext") if isinstance(out.get("ext"), dict) else {}
+    prog = out.get("progress") if isinstance(out.get("progress"), dict) else {}
+    text = (
+        f"{ext.get('flight_id', '?')} status={out.get('status', '?')} step={prog.get('current_step', '?')} "
+        f"percent={prog.get('percent', '?')} waypoint={ext.get('current_waypoint_index', '?')} "
+        f"media={ext.get('media_count', '?')}"
+    )
+    result = data.get("result")
+    return text + (f" result={result}" if result else "")
+
+
 def build_message(method: str, data: dict[str, Any], *, tid: str | None = None) -> dict[str, Any]:
     """A services envelope: fresh tid and bid, the time in ms."""
     return {
@@ -344,6 +358,23 @@ def cmd_send(ns: argparse.Namespace) -> int:
     if not ns.gateway_sn:
         print(f"dji-gateway send: --gateway-sn is required (or set ${GATEWAY_ENV})", file=sys.stderr)
         return EXIT_USAGE
+    served = None
+    if ns.method == "flighttask_prepare" and not ns.drc:  # file=route.kmz: served here, fingerprinted
+        from gateway.wayline.console_files import serve_prepare_fields
+
+        try:
+            ns.fields, served = serve_prepare_fields(list(ns.fields or []))
+        except OSError as exc:
+            print(f"dji-gateway send: cannot read the KMZ: {exc.strerror or exc}", file=sys.stderr)
+            return EXIT_USAGE
+    try:
+        return _send(ns)
+    finally:
+        if served is not None:
+            served.close()
+
+
+def _send(ns: argparse.Namespace) -> int:
     try:
         data = _checked_data(ns)
     except ValueError as exc:
@@ -595,7 +626,7 @@ class MonitorState:
             self._event_tids[tid] = body.get("need_reply") == 1
             while len(self._event_tids) > 1024:
                 self._event_tids.pop(next(iter(self._event_tids)))
-        text = f"{method} {_compact(data)}"
+        text = f"{method} {_progress_text(data) if method == 'flighttask_progress' else _compact(data)}"
         before = (self.drc.failsafe, self.drc.failsafe_reason)
         if method == "drc_status_notify":
             self.drc.state = int(data.get("drc_state", self.drc.state))

@@ -135,17 +135,19 @@ def rig(broker: LocalBroker) -> Iterator[dict[str, Any]]:
         pty.stop()
 
 
-POINTS = [(0.0, 0.0), (40.0, 0.0), (40.0, 40.0)]  # north, east (m) from home
+HEIGHT = 12.0  # m above the take-off point
+POINTS = [(0.0, 0.0), (30.0, 0.0), (30.0, 30.0)]  # north, east (m) from home
 
 
-def _route_kmz(height: float = 25.0, **kw: Any) -> tuple[bytes, list[tuple[float, float]]]:
+def _route_kmz(height: float = HEIGHT, **kw: Any) -> tuple[bytes, list[tuple[float, float]]]:
     coords = [_ne(n, e) for n, e in POINTS]
     pts = [PointSpec(*coords[0], height), PointSpec(*coords[1], height, actions=[
         ActionSpec("gimbalRotate", {"gimbalRotateMode": "absoluteAngle", "gimbalPitchRotateEnable": 1,
                                     "gimbalPitchRotateAngle": -45}),
         ActionSpec("takePhoto", {"fileSuffix": "wp1", "payloadPositionIndex": 0})]),
         PointSpec(*coords[2], height)]  # fmt: skip
-    return kmz_bytes(waylines_wpml(pts, speed=8.0, **kw)), coords
+    kw.setdefault("take_off_security_height", 8.0)  # the dock minimum
+    return kmz_bytes(waylines_wpml(pts, speed=10.0, transitional_speed=10.0, **kw)), coords
 
 
 def _prepare(
@@ -189,7 +191,7 @@ def test_three_waypoint_route_flies_and_ends_ok(rig: dict[str, Any]) -> None:
     def track() -> bool:
         n, e, h = fc.inspect(lambda m: (m.n, m.e, m.u))  # local metres from home
         for i, (pn, pe) in enumerate(POINTS):
-            if math.dist((n, e, h), (pn, pe, 25.0)) < 5.0:
+            if math.dist((n, e, h), (pn, pe, HEIGHT)) < 5.0:
                 visited[i] = True
         return "ok" in _status(cloud, flight) or "failed" in _status(cloud, flight)
 
