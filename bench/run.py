@@ -119,6 +119,7 @@ SUITES: list[tuple[str, Suite]] = [
     ("partitions", _lazy("bench.partitions")),
     ("failover", _lazy("bench.failover")),
     ("console", _lazy("bench.console")),
+    ("wayline", _lazy("bench.wayline")),
     ("soak", _lazy("bench.soak")),
 ]
 #: suites timed inside this one process, pinned to one CPU. The others run brokers, gateways and
