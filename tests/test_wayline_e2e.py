@@ -4,6 +4,8 @@ checks the fingerprint, plans, and flies it on the simulated flight controller o
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import itertools
 import json
 import math
@@ -13,6 +15,7 @@ import uuid
 from collections.abc import Iterator
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
+from urllib.parse import parse_qsl
 
 import paho.mqtt.client as paho
 import pytest
@@ -46,26 +49,35 @@ def _distance(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
 
 
 class FileStore:
-    """A plain HTTP file server on 127.0.0.1 (object storage where expiry does not matter)."""
+    """Object storage on 127.0.0.1 with pre-signed, expiring URLs (``?Expires=<unix s>&Signature=<hmac>``,
+    the shape of an OSS/S3 v2 pre-signed URL): past its expiry or with a wrong signature a GET is 403.
+    (moto's server mode was tried for this and does not enforce a pre-signed URL's expiry.)"""
+
+    KEY = b"test-signing-key"
 
     def __init__(self) -> None:
         self.files: dict[str, bytes] = {}
-        self.gets: list[str] = []
+        self.gets: list[tuple[str, int]] = []
         store = self
 
         class Handler(BaseHTTPRequestHandler):
             def do_GET(self) -> None:
-                path = self.path.split("?")[0]
-                store.gets.append(path)
+                path, _, query = self.path.partition("?")
+                args = dict(parse_qsl(query))
                 body = store.files.get(path)
+                expires = int(args.get("Expires", "0"))
                 if body is None:
-                    self.send_response(404)
-                    self.end_headers()
-                    return
-                self.send_response(200)
-                self.send_header("Content-Length", str(len(body)))
+                    code = 404
+                elif args.get("Signature") != store.sign(path, expires) or expires < time.time():
+                    code = 403
+                else:
+                    code = 200
+                store.gets.append((path, code))
+                self.send_response(code)
+                self.send_header("Content-Length", str(len(body) if code == 200 and body else 0))
                 self.end_headers()
-                self.wfile.write(body)
+                if code == 200 and body:
+                    self.wfile.write(body)
 
             def log_message(self, *args: Any) -> None:
                 pass
@@ -74,9 +86,17 @@ class FileStore:
         self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
         self.thread.start()
 
-    def put(self, name: str, data: bytes) -> str:
+    def sign(self, path: str, expires: int) -> str:
+        return hmac.new(self.KEY, f"GET {path} {expires}".encode(), hashlib.sha256).hexdigest()
+
+    def put(self, name: str, data: bytes) -> None:
         self.files[f"/{name}"] = data
-        return f"http://127.0.0.1:{self.server.server_port}/{name}?X-Amz-Expires=3600&X-Amz-Signature=abc"
+
+    def url(self, name: str, expires_in: float = 3600.0) -> str:
+        expires = int(time.time() + expires_in)
+        path = f"/{name}"
+        query = f"Expires={expires}&Signature={self.sign(path, expires)}"
+        return f"http://127.0.0.1:{self.server.server_port}{path}?{query}"
 
     def close(self) -> None:
         self.server.shutdown()
@@ -86,8 +106,9 @@ class FileStore:
 class ResourceAnswerer:
     """The cloud's answer to flighttask_resource_get: a fresh URL and the stored fingerprint."""
 
-    def __init__(self, broker: LocalBroker, files: dict[str, tuple[str, str]]) -> None:
+    def __init__(self, broker: LocalBroker, files: dict[str, tuple[str, str]], store: FileStore) -> None:
         self.files = files
+        self.store = store
         self.asked: list[dict[str, Any]] = []
         self.client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"res-{uuid.uuid4().hex[:8]}")
         self.client.on_message = self._on_message
@@ -98,7 +119,8 @@ class ResourceAnswerer:
     def _on_message(self, client: paho.Client, userdata: Any, msg: paho.MQTTMessage) -> None:
         body = json.loads(msg.payload)
         self.asked.append(body)
-        url, fingerprint = self.files[body["data"]["flight_id"]]
+        name, fingerprint = self.files[body["data"]["flight_id"]]
+        url = self.store.url(name)  # a fresh pre-signed URL, as DJI's reference cloud makes one
         answer = {"result": 0, "output": {"file": {"url": url, "fingerprint": fingerprint}}}
         reply = {"tid": body["tid"], "bid": body["bid"], "timestamp": int(time.time() * 1000),
                  "method": body["method"], "data": answer}  # fmt: skip
@@ -119,7 +141,7 @@ def rig(broker: LocalBroker) -> Iterator[dict[str, Any]]:
     )
     store = FileStore()
     files: dict[str, tuple[str, str]] = {}
-    answerer = ResourceAnswerer(broker, files)
+    answerer = ResourceAnswerer(broker, files, store)
     cloud = CloudClient(broker.host, broker.port, GW)
     gw = GatewayThread(settings).start()
     try:
@@ -151,11 +173,17 @@ def _route_kmz(height: float = HEIGHT, **kw: Any) -> tuple[bytes, list[tuple[flo
 
 
 def _prepare(
-    rig: dict[str, Any], flight_id: str, kmz: bytes, fingerprint: str | None = None
+    rig: dict[str, Any],
+    flight_id: str,
+    kmz: bytes,
+    fingerprint: str | None = None,
+    expires_in: float = 3600.0,
 ) -> dict[str, Any]:
-    url = rig["store"].put(f"{flight_id}.kmz", kmz)
+    name = f"{flight_id}.kmz"
+    rig["store"].put(name, kmz)
+    url = rig["store"].url(name, expires_in)
     fp = md5_hex(kmz) if fingerprint is None else fingerprint
-    rig["files"][flight_id] = (url, fp)
+    rig["files"][flight_id] = (name, fp)
     data = {"flight_id": flight_id, "execute_time": int(time.time() * 1000), "task_type": 0,
             "wayline_type": 0, "file": {"url": url, "fingerprint": fp}, "rth_altitude": 40, "rth_mode": 1,
             "out_of_control_action": 0, "exit_wayline_when_rc_lost": 1,
@@ -275,3 +303,58 @@ def test_unflyable_route_is_refused_at_prepare(rig: dict[str, Any]) -> None:
     reply = _prepare(rig, str(uuid.uuid4()), kmz)
     assert reply["data"]["result"] == 314003
     assert "1541" in reply["data"]["output"]["reason"]
+
+
+def test_an_expired_url_is_renewed_through_flighttask_resource_get(rig: dict[str, Any]) -> None:
+    cloud, store = rig["cloud"], rig["store"]
+    kmz, _ = _route_kmz()
+    flight = str(uuid.uuid4())
+    # the URL expired before the prepare arrived (a timed task prepared long ago): the prepare still
+    # answers 0, and the execute asks for a fresh URL, downloads it and flies
+    assert _prepare(rig, flight, kmz, expires_in=-10)["data"]["result"] == 0
+    assert (f"/{flight}.kmz", 403) in store.gets
+    assert cloud.service("flighttask_execute", {"flight_id": flight})["data"]["result"] == 0
+    wait_until(lambda: "in_progress" in _status(cloud, flight), 30, what="flying with the fresh URL")
+    assert store.gets.count((f"/{flight}.kmz", 200)) == 1
+    assert "failed" not in _status(cloud, flight)
+
+
+def test_no_working_url_fails_the_run_with_314013(rig: dict[str, Any]) -> None:
+    cloud, store, fc = rig["cloud"], rig["store"], rig["fc"]
+    kmz, _ = _route_kmz()
+    flight = str(uuid.uuid4())
+    assert _prepare(rig, flight, kmz, expires_in=-10)["data"]["result"] == 0
+    del store.files[f"/{flight}.kmz"]  # the object is gone: the fresh URL gets 404
+    assert cloud.service("flighttask_execute", {"flight_id": flight})["data"]["result"] == 0
+    wait_until(lambda: _status(cloud, flight)[-1:] == ["failed"], 20, what="failed")
+    final = _progress(cloud, flight)[-1]["data"]
+    assert final["result"] == 314013 and final["output"]["progress"]["current_step"] == 35
+    assert fc.inspect(lambda m: (m.in_air, m.motors_on)) == (False, False)
+
+
+def test_return_home_ends_the_task_and_lands_at_home(rig: dict[str, Any]) -> None:
+    cloud, fc = rig["cloud"], rig["fc"]
+    kmz, _ = _route_kmz()
+    flight = str(uuid.uuid4())
+    assert _prepare(rig, flight, kmz)["data"]["result"] == 0
+    assert cloud.service("flighttask_execute", {"flight_id": flight})["data"]["result"] == 0
+    wait_until(
+        lambda: any(
+            e["data"]["output"]["ext"]["current_waypoint_index"] >= 2 for e in _progress(cloud, flight)
+        ),
+        60,
+        what="past waypoint 1",
+    )
+    assert cloud.service("return_home", None)["data"]["result"] == 0
+    wait_until(lambda: _status(cloud, flight)[-1:] == ["canceled"], 5, what="task canceled")
+    bp = _progress(cloud, flight)[-1]["data"]["output"]["ext"]["break_point"]
+    assert bp["break_reason"] == 1283 and bp["index"] >= 2
+    info = cloud.wait_for("/events", lambda b: b.get("method") == "return_home_info")[-1]["data"]
+    assert info["flight_id"] == flight and len(info["planned_path_points"]) == 2
+    home = info["planned_path_points"][-1]
+    assert _distance(home["latitude"], home["longitude"], *HOME) < 1.0
+    assert abs(home["height"] - (HOME_ALT + 40.0)) < 0.5  # rth_altitude 40 m above the take-off point
+    # over home, then the FC's landing (the mission's finish action 2); the descent itself is the FC's
+    wait_until(lambda: fc.inspect(lambda m: m.task == "landing"), 30, what="landing over home")
+    assert fc.inspect(lambda m: math.hypot(m.n, m.e)) < 2.0
+    assert cloud.service("return_home_cancel", None)["data"]["result"] == 314000  # no longer returning

@@ -13,7 +13,9 @@ Choices where WAYLINE-NOTES is silent (a DJI dock's behaviour where known):
 * ``flighttask_prepare`` downloads and checks the file at once and waits for it up to
   :data:`PREPARE_WAIT` s: a wrong fingerprint, a bad file or a route the aircraft cannot fly is the
   prepare's non-zero result (nothing is uploaded, nothing moves); a slower download goes on and a failure
-  then fails the execute. ``flighttask_execute`` answers at once and the run reports by progress events.
+  then fails the execute. A file that cannot be obtained (an expired pre-signed URL, a host not reachable)
+  does not fail the prepare: the execute asks for a fresh URL, as a dock does (314013 if that fails too).
+  ``flighttask_execute`` answers at once and the run reports by progress events.
 * Before each run the gateway asks ``flighttask_resource_get``; an answer with a file is downloaded
   unless it has the fingerprint already verified; no answer (or an error) falls back to the prepared file.
 * ``return_home`` ends a running task ``canceled`` (break reason 1283 "user RTH") and flies the gateway's
@@ -163,10 +165,15 @@ class WaylineService:
         file = self._files.get(task.flight_id)
         if file is not None:
             await asyncio.wait({file}, timeout=PREPARE_WAIT)
-            if file.done() and (file.cancelled() or file.exception() is not None):
-                code, reason = _failure(None if file.cancelled() else file.exception())
-                self.book.failed(task, code, reason, None)
-                return code, {"reason": reason}
+            failure = _file_failure(file)
+            if failure is not None and failure[0] == _UNOBTAINABLE:
+                # an expired or unreachable URL: the execute asks flighttask_resource_get for a fresh one
+                log.warning(
+                    "wayline task %s: %s; a fresh URL is asked for at execute", task.flight_id, failure[1]
+                )
+            elif failure is not None:
+                self.book.failed(task, *failure, None)
+                return failure[0], {"reason": failure[1]}
         return ResultCode.SUCCESS, None
 
     async def _load(self, aircraft: Any, url: str, fingerprint: str, prepare: Any) -> _File:
@@ -212,10 +219,9 @@ class WaylineService:
     async def _flighttask_execute(self, aircraft: Any, data: Any) -> Result:
         task = self.book.get(data.flight_id)
         if task is not None and task.phase is Phase.PREPARED:
-            file = self._files.get(task.flight_id)
-            if file is not None and file.done() and file.exception() is not None:
-                code, reason = _failure(None if file.cancelled() else file.exception())
-                self.book.failed(task, code, reason, None)
+            failure = _file_failure(self._files.get(task.flight_id))
+            if failure is not None and failure[0] != _UNOBTAINABLE:
+                self.book.failed(task, *failure, None)
         verdict, start = self.book.execute(data.flight_id, self.clock.monotonic())
         if start:
             assert task is not None
@@ -478,6 +484,16 @@ class WaylineService:
             run.cancel()
         for file in self._files.values():
             file.cancel()
+
+
+def _file_failure(file: asyncio.Task[_File] | None) -> tuple[int, str] | None:
+    """Why a finished download/check failed (code, reason), or None (not done, or fine)."""
+    if file is None or not file.done():
+        return None
+    if file.cancelled():
+        return _UNOBTAINABLE, "the download was cancelled"
+    exc = file.exception()
+    return None if exc is None else _failure(exc)
 
 
 def _failure(exc: BaseException | None) -> tuple[int, str]:
