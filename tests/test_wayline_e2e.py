@@ -358,3 +358,24 @@ def test_return_home_ends_the_task_and_lands_at_home(rig: dict[str, Any]) -> Non
     wait_until(lambda: fc.inspect(lambda m: m.task == "landing"), 30, what="landing over home")
     assert fc.inspect(lambda m: math.hypot(m.n, m.e)) < 2.0
     assert cloud.service("return_home_cancel", None)["data"]["result"] == 314000  # no longer returning
+
+
+def test_a_conditional_task_is_announced_ready_once(rig: dict[str, Any]) -> None:
+    cloud = rig["cloud"]
+    kmz, _ = _route_kmz()
+    flight = str(uuid.uuid4())
+    name = f"{flight}.kmz"
+    rig["store"].put(name, kmz)
+    now = int(time.time() * 1000)
+    file = {"url": rig["store"].url(name), "fingerprint": md5_hex(kmz)}
+    conditions = {"battery_capacity": 10, "begin_time": now - 1000, "end_time": now + 60_000}
+    data = {"flight_id": flight, "task_type": 2, "file": file, "ready_conditions": conditions}
+    assert cloud.service("flighttask_prepare", data)["data"]["result"] == 0
+    ready = cloud.wait_for("/events", lambda b: b.get("method") == "flighttask_ready", timeout=5)
+    assert ready[0]["data"] == {"flight_ids": [flight]} and ready[0]["need_reply"] == 1
+    time.sleep(1.5)
+    assert len(cloud.find("/events", lambda b: b.get("method") == "flighttask_ready")) == 1
+    # a conditional task without its conditions is refused
+    bad = {**data, "flight_id": "other"}
+    del bad["ready_conditions"]
+    assert cloud.service("flighttask_prepare", bad)["data"]["result"] == 325001

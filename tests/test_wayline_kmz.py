@@ -358,3 +358,17 @@ def test_wayline_modules_are_sans_io() -> None:
                 or top in __import__("sys").stdlib_module_names
             ), f"{rel} imports {name}"
             assert not name.startswith(("adapters.osdk.adapter", "adapters.osdk.wayline ", "gateway.")), name
+
+
+def test_task_book_time_outs() -> None:
+    from gateway.wayline.task import PREPARE_TTL, RUN_TIMEOUT
+
+    book = TaskBook()
+    book.prepare(_Prep("old"), 0.0)
+    run, _ = book.prepare(_Prep("run"), 0.0)
+    book.execute("run", 10.0)
+    assert book.expired(RUN_TIMEOUT) == []
+    assert book.expired(10.0 + RUN_TIMEOUT + 1) == [run]
+    book.stopped(run, "timeout", None)
+    assert book.progress(run)["output"]["status"] == "timeout"
+    assert book.expired(PREPARE_TTL + 1) == [] and book.get("old") is None and book.get("run") is None
