@@ -21,6 +21,7 @@ from pydantic import Field, StringConstraints
 from .base import Float, InboundModel, Int, Latitude, Longitude, OutboundModel, Text, int_enum
 from .envelope import EmptyRequest
 from .results import ResultValue
+from .services import ExitWaylineWhenRcLost  # the same enum as takeoff_to_point's
 
 #: ``flight_id``: the SDK's regex ``^[^<>:"/|?*._\\]+$`` [SDK:FlighttaskPrepareRequest].
 FlightId = Annotated[
@@ -45,11 +46,6 @@ class OutOfControlAction(enum.IntEnum):
     RETURN_HOME = 0
     HOVER = 1
     LAND = 2
-
-
-class ExitWaylineWhenRcLost(enum.IntEnum):
-    CONTINUE = 0
-    EXIT = 1
 
 
 class PrecisionType(enum.IntEnum):

@@ -191,6 +191,15 @@ def _prepare(
     return rig["cloud"].service("flighttask_prepare", data)
 
 
+def _prepare_and_execute(rig: dict[str, Any]) -> str:
+    """A route prepared and executed (both answered 0): its flight_id."""
+    kmz, _ = _route_kmz()
+    flight = str(uuid.uuid4())
+    assert _prepare(rig, flight, kmz)["data"]["result"] == 0
+    assert rig["cloud"].service("flighttask_execute", {"flight_id": flight})["data"]["result"] == 0
+    return flight
+
+
 def _progress(cloud: CloudClient, flight_id: str) -> list[dict[str, Any]]:
     return [
         b
@@ -261,10 +270,7 @@ def test_wrong_fingerprint_fails_and_nothing_moves(rig: dict[str, Any]) -> None:
 
 def test_pause_holds_and_recovery_finishes(rig: dict[str, Any]) -> None:
     cloud, fc = rig["cloud"], rig["fc"]
-    kmz, _ = _route_kmz()
-    flight = str(uuid.uuid4())
-    assert _prepare(rig, flight, kmz)["data"]["result"] == 0
-    assert cloud.service("flighttask_execute", {"flight_id": flight})["data"]["result"] == 0
+    flight = _prepare_and_execute(rig)
     # wait until it flies between waypoints 0 and 1 at speed
     wait_until(
         lambda: (
@@ -334,10 +340,7 @@ def test_no_working_url_fails_the_run_with_314013(rig: dict[str, Any]) -> None:
 
 def test_return_home_ends_the_task_and_lands_at_home(rig: dict[str, Any]) -> None:
     cloud, fc = rig["cloud"], rig["fc"]
-    kmz, _ = _route_kmz()
-    flight = str(uuid.uuid4())
-    assert _prepare(rig, flight, kmz)["data"]["result"] == 0
-    assert cloud.service("flighttask_execute", {"flight_id": flight})["data"]["result"] == 0
+    flight = _prepare_and_execute(rig)
     wait_until(
         lambda: any(
             e["data"]["output"]["ext"]["current_waypoint_index"] >= 2 for e in _progress(cloud, flight)

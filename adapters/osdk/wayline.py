@@ -51,6 +51,7 @@ class OsdkWayline:
         self.adapter = adapter
         self.paused = False
         self._task: Task | None = None
+        self._speed_changes: set[asyncio.Task[None]] = set()  # held until done (the loop keeps weak refs)
 
     # -- planning --------------------------------------------------------------------------------
     def plan(
@@ -126,7 +127,9 @@ class OsdkWayline:
                 want = mission.speeds[index]
                 if index + 1 < len(mission.points) and abs(want - speed[0]) > 1e-3:
                     speed[0] = want
-                    asyncio.get_running_loop().create_task(self._set_speed(want))
+                    change = asyncio.get_running_loop().create_task(self._set_speed(want))
+                    self._speed_changes.add(change)
+                    change.add_done_callback(self._speed_changes.discard)
 
             task.on_reached = reached
             await self.adapter._gs("wp_start_stop", {"start": 0})

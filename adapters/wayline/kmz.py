@@ -346,7 +346,7 @@ def parse_wpml(xml: bytes, *, max_waypoints: int = MAX_WAYPOINTS) -> Route:
         root = fromstring(xml, forbid_dtd=True, forbid_entities=True, forbid_external=True)
     except DefusedXmlException as exc:
         raise KmzError(FILE_FORMAT, f"WPML refused: {type(exc).__name__} (no DTDs or entities)") from None
-    except (ParseError, ValueError) as exc:
+    except (ParseError, ValueError, LookupError) as exc:  # LookupError: an unknown declared encoding
         raise KmzError(FILE_FORMAT, f"WPML is not well-formed XML: {str(exc)[:80]}") from None
     if root.tag != f"{{{KML_NS}}}kml":
         raise KmzError(FILE_FORMAT, "root element is not KML 2.2's kml")

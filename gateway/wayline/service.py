@@ -58,8 +58,11 @@ from gateway.wayline.task import (
     STEP_URL,
     Phase,
     TaskBook,
+    Verdict,
     WaylineTask,
 )
+from schemas import TopicKind
+from schemas.registry import WAYLINE_METHODS
 from schemas.results import ResultCode
 
 log = logging.getLogger(__name__)
@@ -72,17 +75,7 @@ TAKEOFF_TIMEOUT = 30.0
 RTH_SPEED = 10.0
 PROGRESS_PERIOD = 1.0
 _UNOBTAINABLE = int(ResultCode.WAYLINE_FILE_UNOBTAINABLE)
-METHODS = frozenset(
-    {
-        "flighttask_prepare",
-        "flighttask_execute",
-        "flighttask_undo",
-        "flighttask_pause",
-        "flighttask_recovery",
-        "return_home",
-        "return_home_cancel",
-    }
-)
+METHODS = frozenset(spec.method for spec in WAYLINE_METHODS if spec.kind is TopicKind.SERVICES)
 #: Services that move the aircraft: flight authority first when the dispatcher requires it.
 _MOVING = frozenset({"flighttask_execute", "flighttask_recovery", "return_home", "return_home_cancel"})
 
@@ -122,6 +115,7 @@ class WaylineService:
         self._files: dict[str, asyncio.Task[_File]] = {}
         self._runs: dict[str, asyncio.Task[None]] = {}
         self._ready_sent: set[str] = set()
+        self._stops: set[asyncio.Task[None]] = set()  # time-out stops in flight
         self._rth: dict[str, Any] | None = None  # the way home being flown: path, flight_id
         self._last_rth_altitude = DEFAULT_RTH_ALTITUDE
 
@@ -242,26 +236,29 @@ class WaylineService:
         return verdict.result, ({"reason": verdict.reason} if verdict.reason else None)
 
     async def _flighttask_pause(self, aircraft: Any, data: Any) -> Result:
-        verdict, task = self.book.pause()
-        if task is None:
-            return verdict.result, {"reason": verdict.reason}
-        try:
-            await aircraft.wayline.pause()
-        except (DeviceRejected, DeviceTimeout, DeviceNotConnected) as exc:
-            return ResultCode.WAYLINE_PAUSE_FAILED, {"reason": str(exc)[:300]}
-        self.book.paused(task)
-        self._emit(task)
-        return ResultCode.SUCCESS, None
+        return await self._hold_or_go(self.book.pause(), aircraft.wayline.pause, self.book.paused,
+                                      ResultCode.WAYLINE_PAUSE_FAILED)  # fmt: skip
 
     async def _flighttask_recovery(self, aircraft: Any, data: Any) -> Result:
-        verdict, task = self.book.recovery()
+        return await self._hold_or_go(self.book.recovery(), aircraft.wayline.resume, self.book.resumed,
+                                      ResultCode.WAYLINE_RESUME_FAILED)  # fmt: skip
+
+    async def _hold_or_go(
+        self,
+        decided: tuple[Verdict, WaylineTask | None],
+        act: Callable[[], Awaitable[None]],
+        done: Callable[[WaylineTask], None],
+        failed: int,
+    ) -> Result:
+        """Pause or recovery: the book's verdict, then the aircraft, then the book and a progress event."""
+        verdict, task = decided
         if task is None:
             return verdict.result, {"reason": verdict.reason}
         try:
-            await aircraft.wayline.resume()
+            await act()
         except (DeviceRejected, DeviceTimeout, DeviceNotConnected) as exc:
-            return ResultCode.WAYLINE_RESUME_FAILED, {"reason": str(exc)[:300]}
-        self.book.resumed(task)
+            return failed, {"reason": str(exc)[:300]}
+        done(task)
         self._emit(task)
         return ResultCode.SUCCESS, None
 
@@ -446,9 +443,11 @@ class WaylineService:
                 self._rth = None
         for late in self.book.expired(now):
             if aircraft is not None:
-                asyncio.get_running_loop().create_task(
+                stop = asyncio.get_running_loop().create_task(
                     self._stop_task(aircraft, late, "timeout", break_reason=2)
                 )
+                self._stops.add(stop)
+                stop.add_done_callback(self._stops.discard)
         ready = [f for f, t in self.book.tasks.items() if self._ready(aircraft, t)]
         if ready:
             self._ready_sent.update(ready)
