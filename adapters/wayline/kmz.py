@@ -29,6 +29,7 @@ import hashlib
 import io
 import re
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from typing import Any
 from xml.etree.ElementTree import Element, ParseError
@@ -164,6 +165,19 @@ def check_fingerprint(kmz: bytes, fingerprint: str) -> str:
 # ------------------------------------------------------------------------------------------------- zip
 
 
+#: What zipfile raises for a damaged or unsupported archive (NotImplementedError: a compression method or
+#: zip version it does not know; RuntimeError: encrypted entries; zlib.error: corrupt deflate data).
+_ZIP_ERRORS = (
+    zipfile.BadZipFile,
+    zlib.error,
+    OSError,
+    ValueError,
+    EOFError,
+    NotImplementedError,
+    RuntimeError,
+)
+
+
 def _bad_name(name: str) -> bool:
     if name.startswith(("/", "\\")) or "\\" in name or re.match(r"^[A-Za-z]:", name) or "\x00" in name:
         return True
@@ -174,7 +188,7 @@ def unpack_wpml(kmz: bytes, limits: Limits = Limits()) -> bytes:
     """The bytes of ``wpmz/waylines.wpml`` from a KMZ, within ``limits``; KmzError 314003 otherwise."""
     try:
         archive = zipfile.ZipFile(io.BytesIO(kmz))
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+    except _ZIP_ERRORS as exc:
         raise KmzError(FILE_FORMAT, f"not a KMZ (zip) file: {type(exc).__name__}") from None
     with archive:
         infos = archive.infolist()
@@ -197,7 +211,7 @@ def unpack_wpml(kmz: bytes, limits: Limits = Limits()) -> bytes:
             with archive.open(info) as stream:
                 # declared sizes can lie: read at most the limit + 1 and refuse what goes past it
                 data = stream.read(limits.max_entry_bytes + 1)
-        except (zipfile.BadZipFile, OSError, ValueError, EOFError, NotImplementedError, RuntimeError) as exc:
+        except _ZIP_ERRORS as exc:
             raise KmzError(FILE_FORMAT, f"unreadable {WAYLINES_PATH}: {type(exc).__name__}") from None
         if len(data) > limits.max_entry_bytes:
             raise KmzError(FILE_FORMAT, "KMZ too large when unpacked (zip bomb?)")
