@@ -12,6 +12,8 @@ readable request, so the two cannot drift apart:
 - ``services``: the input is a raw payload on the gateway's ``services`` topic, handled by the real
   dispatcher (no broker: the function the MQTT thread calls): no handler exception, a readable tid gets
   exactly one reply with that tid and a valid result code, everything published is JSON without NaN;
+- ``kmz``: a wayline file (a KMZ, or the WPML inside one) read, parsed and mapped onto Onboard SDK
+  missions: only the documented refusals (314xxx with a reason) come out;
 - ``drc``: the input is a DRC session with payload authority, one ``drc/down`` payload per line:
   nothing raises, replies are JSON, the set-point stays finite, and an emergency stop holds a zero
   set-point (no device driven otherwise) until the sticks restart at seq 0.
@@ -489,6 +491,40 @@ def _drc_seeds() -> list[bytes]:
     return seeds
 
 
+def _kmz() -> OneInput:
+    """A wayline file from the cloud: a KMZ (``PK…``) or the WPML inside one, read, parsed and mapped
+    onto Onboard SDK missions: only the documented refusals (KmzError, RouteRefused) may come out."""
+    with _instrumented():
+        from adapters.osdk.wayline_plan import PlanOptions, RouteRefused, plan_route
+        from adapters.wayline.kmz import KmzError, Limits, parse_wpml, unpack_wpml
+
+    limits = Limits(max_entry_bytes=1 << 20, max_total_bytes=4 << 20)
+    options = PlanOptions(
+        here=(22.5431, 113.958, 0.0), in_air=False, home=(22.5431, 113.958), home_altitude=50.0
+    )
+
+    def one(data: bytes) -> None:
+        try:
+            route = parse_wpml(unpack_wpml(data, limits) if data[:2] == b"PK" else data)
+            plan_route(route, options)
+        except (KmzError, RouteRefused) as exc:
+            assert exc.reason and exc.code in (314000, 314002, 314003, 314005), exc
+
+    return one
+
+
+def _kmz_seeds() -> list[bytes]:
+    from adapters.wayline.writer import ActionSpec, PointSpec, kmz_bytes, waylines_wpml
+
+    actions = [ActionSpec("gimbalRotate", {"gimbalPitchRotateEnable": 1, "gimbalPitchRotateAngle": -45}),
+               ActionSpec("takePhoto"), ActionSpec("hover", {"hoverTime": 2})]  # fmt: skip
+    points = [
+        PointSpec(22.5431 + i * 1e-4, 113.958, 30.0, actions=actions if i == 1 else ()) for i in range(3)
+    ]
+    wpml = waylines_wpml(points, finish_action="goHome").encode()
+    return [wpml, kmz_bytes(wpml), waylines_wpml(points, height_mode="WGS84").encode()]
+
+
 @dataclass(frozen=True)
 class Target:
     """One fuzz target: how to build its ``TestOneInput`` (instrumented), its seeds, its input size and
@@ -507,6 +543,7 @@ TARGETS: dict[str, Target] = {
     "robomaster": Target(lambda: _decoder("robomaster"), lambda: _decoder_seeds("robomaster"), 512),
     "services": Target(_services, _services_seeds, 2048, lambda: _json_dictionary("services")),
     "drc": Target(_drc, _drc_seeds, 1024, lambda: _json_dictionary("drc/down")),
+    "kmz": Target(_kmz, _kmz_seeds, 8192),
 }
 
 
