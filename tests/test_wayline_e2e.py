@@ -148,7 +148,8 @@ def rig(broker: LocalBroker) -> Iterator[dict[str, Any]]:
         cloud.wait_for("status", lambda b: [d["sn"] for d in b["data"]["sub_devices"]] == [SN], timeout=10)
         cloud.wait_for(f"{SN}/osd", lambda b: "latitude" in b["data"])
         assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
-        yield {"fc": device, "cloud": cloud, "gw": gw, "store": store, "files": files, "answerer": answerer}
+        yield {"fc": device, "cloud": cloud, "gw": gw, "store": store, "files": files, "answerer": answerer,
+               "pty": pty}  # fmt: skip
     finally:
         gw.stop()
         cloud.close()
@@ -382,3 +383,12 @@ def test_a_conditional_task_is_announced_ready_once(rig: dict[str, Any]) -> None
     bad = {**data, "flight_id": "other"}
     del bad["ready_conditions"]
     assert cloud.service("flighttask_prepare", bad)["data"]["result"] == 325001
+
+
+def test_losing_the_flight_controller_fails_the_task(rig: dict[str, Any]) -> None:
+    cloud = rig["cloud"]
+    flight = _prepare_and_execute(rig)
+    wait_until(lambda: "in_progress" in _status(cloud, flight), 30, what="flying")
+    rig["pty"].stop()  # the serial link is gone: the FC's pushes stop
+    wait_until(lambda: _status(cloud, flight)[-1:] == ["failed"], 20, what="failed")
+    assert _progress(cloud, flight)[-1]["data"]["result"] == 325012

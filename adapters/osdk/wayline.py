@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from adapters.base import DeviceRejected, DeviceTimeout
+from adapters.base import DeviceNotConnected, DeviceRejected, DeviceTimeout
 from adapters.osdk.wayline_plan import FcMission, Plan, PlanOptions, plan_route
 from adapters.wayline.kmz import Route
 from schemas.results import ResultCode
@@ -136,6 +136,10 @@ class OsdkWayline:
             if k == 0:
                 on_entered()
             while not (task.finished or task.failed is not None):
+                if not self.adapter.online:
+                    # the FC flies its uploaded mission on its own (a ground-station mission needs no
+                    # host), but nothing it does can be reported or changed any more: the task fails
+                    raise DeviceNotConnected(f"aircraft {self.adapter.info.sn} lost during the mission")
                 await asyncio.sleep(POLL)
             if task.failed is not None:
                 raise DeviceRejected(task.failed, "the flight controller reported a mission error")

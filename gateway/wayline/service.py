@@ -28,6 +28,10 @@ Choices where WAYLINE-NOTES is silent (a DJI dock's behaviour where known):
   ``battery_capacity`` and now within [begin_time, end_time]; the first time they all hold,
   ``flighttask_ready`` names the task. ``executable_conditions.storage_capacity`` cannot be checked on an
   Onboard SDK FC (it reports no storage): accepted and logged as not checked.
+* A lost cloud does not stop a flying task (a dock's aircraft flies on without its cloud); a lost
+  flight controller fails it (325012: the FC flies its uploaded mission on its own, nothing can be
+  reported or changed); a take-off that does not end within :data:`TAKEOFF_TIMEOUT` s fails it with
+  314008 "preparation timed out".
 * ``wayline_precision_type``, ``rth_mode``, ``flight_safety_advance_check`` and ``simulate_mission`` have no
   counterpart on the FC: accepted and logged as ignored (``rth_mode`` 1 preset height is what is flown).
 """
@@ -311,7 +315,10 @@ class WaylineService:
             if not aircraft.in_air:
                 book.step(task, STEP_TAKEOFF, 9)
                 self._emit(task)
-                await runner.take_off(TAKEOFF_TIMEOUT)
+                try:
+                    await runner.take_off(TAKEOFF_TIMEOUT)
+                except DeviceTimeout as exc:  # a dock's "preparation timed out"
+                    raise DeviceRejected(ResultCode.WAYLINE_PREPARE_TIMEOUT, str(exc)) from None
             book.step(task, STEP_TRIGGER, 10)
             self._emit(task)
 
