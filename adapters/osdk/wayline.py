@@ -86,6 +86,12 @@ class OsdkWayline:
         return (t.latitude or 0.0, t.longitude or 0.0)
 
     # -- flying ----------------------------------------------------------------------------------
+    async def ensure_control(self) -> None:
+        """SDK control of the FC (``01 00`` obtain), as ``flight_authority_grab`` takes it, when not held:
+        the FC refuses take-off and missions without it."""
+        if not self.adapter.has_control:
+            await self.adapter._obtain(1)
+
     async def take_off(self, timeout: float) -> None:
         """On the ground: the FC's take-off, then wait until airborne and the take-off has ended."""
         a = self.adapter

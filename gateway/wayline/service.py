@@ -312,6 +312,7 @@ class WaylineService:
             book.planned(task, plan.route_points)
             book.step(task, STEP_UPLOAD, 8)
             self._emit(task)
+            await runner.ensure_control()
             if not aircraft.in_air:
                 book.step(task, STEP_TAKEOFF, 9)
                 self._emit(task)
