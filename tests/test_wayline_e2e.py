@@ -392,3 +392,16 @@ def test_losing_the_flight_controller_fails_the_task(rig: dict[str, Any]) -> Non
     rig["pty"].stop()  # the serial link is gone: the FC's pushes stop
     wait_until(lambda: _status(cloud, flight)[-1:] == ["failed"], 20, what="failed")
     assert _progress(cloud, flight)[-1]["data"]["result"] == 325012
+
+
+def test_a_route_longer_than_one_mission_is_chained(rig: dict[str, Any]) -> None:
+    cloud, fc, gw = rig["cloud"], rig["fc"], rig["gw"]
+    adapter = gw.app.devices.by_sn(SN)
+    gw.call(lambda: setattr(adapter.wayline, "mission_max", 2))  # 3 waypoints → 2 chained missions
+    inits = fc.inspect(lambda m: m.actions["wp_init"])
+    flight = _prepare_and_execute(rig)
+    wait_until(lambda: _status(cloud, flight)[-1:] == ["ok"], 90, what="chained route flown")
+    assert fc.inspect(lambda m: m.actions["wp_init"]) - inits == 2
+    final = _progress(cloud, flight)[-1]["data"]["output"]["ext"]
+    assert final["current_waypoint_index"] == 3 and final["media_count"] == 1
+    assert fc.inspect(lambda m: math.hypot(m.n - POINTS[2][0], m.e - POINTS[2][1])) < 5.0

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from adapters.base import DeviceNotConnected, DeviceRejected, DeviceTimeout
-from adapters.osdk.wayline_plan import FcMission, Plan, PlanOptions, plan_route
+from adapters.osdk.wayline_plan import MISSION_MAX, FcMission, Plan, PlanOptions, plan_route
 from adapters.wayline.kmz import Route
 from schemas.results import ResultCode
 
@@ -52,6 +52,9 @@ class OsdkWayline:
         self.paused = False
         self._task: Task | None = None
         self._speed_changes: set[asyncio.Task[None]] = set()  # held until done (the loop keeps weak refs)
+        #: waypoints per ground-station mission (the u8 length allows 255; a firmware that takes fewer
+        #: sets less, and longer routes are chained)
+        self.mission_max = MISSION_MAX
 
     # -- planning --------------------------------------------------------------------------------
     def plan(
@@ -75,6 +78,7 @@ class OsdkWayline:
             exit_wayline_when_rc_lost=exit_wayline_when_rc_lost,
             break_point=break_point,
             vel_cmd_range=self.adapter.settings.mission_vel_cmd_range,
+            mission_max=self.mission_max,
         )
         return plan_route(route, options)
 
