@@ -10,6 +10,7 @@ from __future__ import annotations
 from urllib.parse import urlsplit
 
 import aiohttp
+from yarl import URL
 
 __all__ = ["MAX_KMZ_BYTES", "FetchError", "fetch_kmz", "safe_url"]
 
@@ -43,7 +44,10 @@ async def fetch_kmz(url: str, *, timeout: float = 30.0, max_bytes: int = MAX_KMZ
         total=timeout, sock_connect=min(10.0, timeout), sock_read=min(15.0, timeout)
     )
     try:
-        async with aiohttp.ClientSession(timeout=limits) as session, session.get(url) as resp:
+        # encoded=True: the URL goes out byte for byte as the cloud wrote it. A pre-signed URL's query is part
+        # of its signature (WAYLINE-NOTES §6); yarl would otherwise re-quote it (%2F → /).
+        target = URL(url, encoded=True)
+        async with aiohttp.ClientSession(timeout=limits) as session, session.get(target) as resp:
             if resp.status != 200:
                 raise FetchError(f"HTTP {resp.status} from {safe_url(url)}")
             if resp.content_length is not None and resp.content_length > max_bytes:
