@@ -43,6 +43,7 @@ class ResultCode(enum.IntEnum):
     WAYLINE_PREPARE_TIMEOUT = 314008, "Wayline task: preparation timed out."
     WAYLINE_FILE_UNOBTAINABLE = 314013, "Wayline task: the KMZ file (or its URL) could not be obtained."
     WAYLINE_TASK_UNKNOWN = 319003, "Wayline task: no task with this flight_id."
+    WAYLINE_TASK_EXPIRED = 319004, "Wayline task: expired (an immediate task more than 30 s from its time)."
     WAYLINE_TASK_RUNNING = 319006, "Wayline task: running, cannot be cancelled (undo)."
     WAYLINE_OTHER_TASK_RUNNING = 319016, "Wayline task: another task is running."
     WAYLINE_PAUSE_FAILED = 319020, "Wayline task: pause failed."

@@ -16,7 +16,7 @@ from __future__ import annotations
 import enum
 from typing import Annotated
 
-from pydantic import Field, StringConstraints
+from pydantic import Field, StringConstraints, model_validator
 
 from .base import Float, InboundModel, Int, Latitude, Longitude, OutboundModel, Text, int_enum
 from .envelope import EmptyRequest
@@ -175,6 +175,15 @@ class FlighttaskPrepare(InboundModel):
     wayline_precision_type: int_enum(PrecisionType) | None = Field(default=None, description="0 GPS, 1 RTK.")
     simulate_mission: SimulateMission | None = None
     flight_safety_advance_check: Int | None = Field(default=None, ge=0, le=1)
+
+    @model_validator(mode="after")
+    def _conditions(self) -> FlighttaskPrepare:
+        # [D1][D2]: execute_time is required for immediate and timed tasks, ready_conditions for conditional
+        if self.task_type in (TaskType.IMMEDIATE, TaskType.TIMED) and self.execute_time is None:
+            raise ValueError("execute_time is required when task_type is 0 (immediate) or 1 (timed)")
+        if self.task_type == TaskType.CONDITIONAL and self.ready_conditions is None:
+            raise ValueError("ready_conditions is required when task_type is 2 (conditional)")
+        return self
 
 
 class FlighttaskExecute(InboundModel):

@@ -445,3 +445,23 @@ def test_a_kmz_in_s3_compatible_storage_with_presigned_urls(rig: dict[str, Any])
         wait_until(lambda: "in_progress" in _status(rig["cloud"], flight), 30, what="flying from S3")
     finally:
         server.stop()
+
+
+def test_immediate_tasks_keep_to_their_execute_time(rig: dict[str, Any]) -> None:
+    cloud, store = rig["cloud"], rig["store"]
+    kmz, _ = _route_kmz()
+    store.put("late.kmz", kmz)
+    file = {"url": store.url("late.kmz"), "fingerprint": md5_hex(kmz)}
+    # execute_time is required for immediate and timed tasks [D2]
+    missing = cloud.service("flighttask_prepare", {"flight_id": "no-time", "task_type": 0, "file": file})
+    assert missing["data"]["result"] == 325001 and "execute_time" in missing["data"]["output"]["reason"]
+    late = {
+        "flight_id": "late",
+        "task_type": 0,
+        "execute_time": int(time.time() * 1000) - 60_000,
+        "file": file,
+    }
+    assert cloud.service("flighttask_prepare", late)["data"]["result"] == 0
+    r = cloud.service("flighttask_execute", {"flight_id": "late"})
+    assert r["data"]["result"] == 319004 and "30 s" in r["data"]["output"]["reason"]
+    assert rig["fc"].inspect(lambda m: m.in_air) is False

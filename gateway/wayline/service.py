@@ -74,6 +74,8 @@ log = logging.getLogger(__name__)
 __all__ = ["DEFAULT_RTH_ALTITUDE", "PREPARE_WAIT", "WaylineService"]
 
 PREPARE_WAIT = 2.0
+#: An immediate task is executed within 30 s of its execute_time (WAYLINE-NOTES §2 [FEAT]).
+IMMEDIATE_WINDOW_MS = 30_000
 DEFAULT_RTH_ALTITUDE = 100.0
 TAKEOFF_TIMEOUT = 30.0
 RTH_SPEED = 10.0
@@ -150,8 +152,6 @@ class WaylineService:
             return ResultCode.INVALID_PARAMETERS, {
                 "reason": "out_of_control_action: only 0 (return home), the FC's own failsafe"
             }
-        if data.task_type == 2 and data.ready_conditions is None:
-            return ResultCode.INVALID_PARAMETERS, {"reason": "a conditional task needs ready_conditions"}
         task, new = self.book.prepare(data, self.clock.monotonic())
         if new:
             self._log_ignored(data)
@@ -216,6 +216,14 @@ class WaylineService:
 
     async def _flighttask_execute(self, aircraft: Any, data: Any) -> Result:
         task = self.book.get(data.flight_id)
+        if task is not None and task.phase is Phase.PREPARED and task.request.task_type == 0:
+            skew = abs(self.clock.time_ms() - (task.request.execute_time or self.clock.time_ms()))
+            if skew > IMMEDIATE_WINDOW_MS:
+                # [FEAT]: an immediate task more than 30 s from its execute_time is an error (a dock
+                # without time sync gets 319008; which code a dock sends for this one is not documented)
+                return ResultCode.WAYLINE_TASK_EXPIRED, {
+                    "reason": f"immediate task {skew / 1000:.0f} s from its execute_time (30 s allowed)"
+                }
         if task is not None and task.phase is Phase.PREPARED:
             failure = _file_failure(self._files.get(task.flight_id))
             if failure is not None and failure[0] != _UNOBTAINABLE:
