@@ -29,6 +29,7 @@ def _cli(*args: str, broker: LocalBroker, cwd: Path) -> subprocess.CompletedProc
     return subprocess.run(argv, cwd=cwd, capture_output=True, text=True, timeout=60, env=ENV)
 
 
+@pytest.mark.slow
 def test_fly_a_route_from_the_console(broker: LocalBroker, tmp_path: Path) -> None:
     gateway, _ = simulated_gateway(broker.url)
     cloud = CloudClient(broker.host, broker.port, GW)

@@ -214,6 +214,7 @@ def _status(cloud: CloudClient, flight_id: str) -> list[str]:
     return [b["data"]["output"]["status"] for b in _progress(cloud, flight_id)]
 
 
+@pytest.mark.slow
 def test_three_waypoint_route_flies_and_ends_ok(rig: dict[str, Any]) -> None:
     cloud, fc = rig["cloud"], rig["fc"]
     kmz, _ = _route_kmz()
@@ -270,6 +271,7 @@ def test_wrong_fingerprint_fails_and_nothing_moves(rig: dict[str, Any]) -> None:
     assert fc.inspect(lambda m: m.upload) is None  # nothing was uploaded to the FC
 
 
+@pytest.mark.slow
 def test_pause_holds_and_recovery_finishes(rig: dict[str, Any]) -> None:
     cloud, fc = rig["cloud"], rig["fc"]
     flight = _prepare_and_execute(rig)
@@ -340,6 +342,7 @@ def test_no_working_url_fails_the_run_with_314013(rig: dict[str, Any]) -> None:
     assert fc.inspect(lambda m: (m.in_air, m.motors_on)) == (False, False)
 
 
+@pytest.mark.slow
 def test_return_home_ends_the_task_and_lands_at_home(rig: dict[str, Any]) -> None:
     cloud, fc = rig["cloud"], rig["fc"]
     flight = _prepare_and_execute(rig)
@@ -395,6 +398,7 @@ def test_losing_the_flight_controller_fails_the_task(rig: dict[str, Any]) -> Non
     assert _progress(cloud, flight)[-1]["data"]["result"] == 325012
 
 
+@pytest.mark.slow
 def test_a_route_longer_than_one_mission_is_chained(rig: dict[str, Any]) -> None:
     cloud, fc, gw = rig["cloud"], rig["fc"], rig["gw"]
     adapter = gw.app.devices.by_sn(SN)
