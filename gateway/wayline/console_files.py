@@ -13,11 +13,8 @@ import argparse
 import threading
 import time
 import uuid
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from typing import Any
-
-from adapters.wayline.writer import ActionSpec, PointSpec, kmz_bytes, md5_hex, waylines_wpml
 
 __all__ = ["ServedFile", "add_parsers", "demo_kmz", "serve_prepare_fields"]
 
@@ -26,6 +23,8 @@ class ServedFile:
     """One file at ``http://127.0.0.1:PORT/NAME`` until :meth:`close`."""
 
     def __init__(self, data: bytes, name: str, host: str = "127.0.0.1") -> None:
+        from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer  # only when serving a file
+
         body = data
 
         class Handler(BaseHTTPRequestHandler):
@@ -59,6 +58,8 @@ def serve_prepare_fields(fields: list[str]) -> tuple[list[str], ServedFile | Non
     paths = [f.partition("=")[2] for f in fields if f.startswith("file=")]
     if not paths:
         return fields, None
+    from adapters.wayline.writer import md5_hex
+
     path = Path(paths[-1])
     data = path.read_bytes()
     served = ServedFile(data, path.name.replace("/", "_") or "route.kmz")
@@ -83,6 +84,8 @@ def demo_kmz(height: float = 30.0) -> bytes:
     gimbalRotate (-45°) and a takePhoto at waypoint 1."""
     import math
 
+    from adapters.wayline.writer import ActionSpec, PointSpec, kmz_bytes, waylines_wpml
+
     def at(north: float, east: float) -> tuple[float, float]:
         lat = DEMO_HOME[0] + math.degrees(north / 6_378_137.0)
         return lat, DEMO_HOME[1] + math.degrees(east / (6_378_137.0 * math.cos(math.radians(DEMO_HOME[0]))))
@@ -98,6 +101,8 @@ def demo_kmz(height: float = 30.0) -> bytes:
 
 
 def _cmd_route_demo(ns: argparse.Namespace) -> int:
+    from adapters.wayline.writer import md5_hex
+
     data = demo_kmz(ns.height)
     Path(ns.path).write_bytes(data)
     print(f"wrote {ns.path} ({len(data)} bytes, md5 {md5_hex(data)})")
