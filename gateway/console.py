@@ -185,9 +185,13 @@ def parse_fields(pairs: list[str]) -> dict[str, Any]:
 
 def _progress_text(data: dict[str, Any]) -> str:
     """A wayline task's progress in one line: flight_id status step percent waypoint media (result)."""
-    out = data.get("output") if isinstance(data.get("output"), dict) else {}
-    ext = out.get("ext") if isinstance(out.get("ext"), dict) else {}
-    prog = out.get("progress") if isinstance(out.get("progress"), dict) else {}
+
+    def part(parent: dict[str, Any], name: str) -> dict[str, Any]:
+        value = parent.get(name)
+        return value if isinstance(value, dict) else {}
+
+    out = part(data, "output")
+    ext, prog = part(out, "ext"), part(out, "progress")
     text = (
         f"{ext.get('flight_id', '?')} status={out.get('status', '?')} step={prog.get('current_step', '?')} "
         f"percent={prog.get('percent', '?')} waypoint={ext.get('current_waypoint_index', '?')} "

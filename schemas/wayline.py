@@ -18,7 +18,7 @@ from typing import Annotated
 
 from pydantic import Field, StringConstraints, model_validator
 
-from .base import Float, InboundModel, Int, Latitude, Longitude, OutboundModel, Text, int_enum
+from .base import Float, InboundModel, Int, IntEnumField, Latitude, Longitude, OutboundModel, Text
 from .envelope import EmptyRequest
 from .results import ResultValue
 from .services import ExitWaylineWhenRcLost  # the same enum as takeoff_to_point's
@@ -134,7 +134,7 @@ class BreakPoint(InboundModel):
     """Where an interrupted task stopped (from its last progress ``ext.break_point``)."""
 
     index: Int = Field(ge=0, le=65535, description="Waypoint (state 1) or segment (state 0) index.")
-    state: int_enum(BreakPointState) = Field(description="0: on a segment, 1: on a waypoint.")
+    state: IntEnumField[BreakPointState] = Field(description="0: on a segment, 1: on a waypoint.")
     progress: Float = Field(ge=0, le=1, description="Progress along the segment, 0..1.")
     wayline_id: Int = Field(ge=0, le=65535, description="wpml:waylineId of the Folder.")
 
@@ -150,7 +150,7 @@ class FlighttaskPrepare(InboundModel):
 
     flight_id: FlightId = Field(description="Task id (the reference cloud sends bid = flight_id).")
     execute_time: ExecuteTime | None = Field(default=None, description="When to start (ms since the epoch).")
-    task_type: int_enum(TaskType) = Field(description="0: immediate, 1: timed, 2: conditional.")
+    task_type: IntEnumField[TaskType] = Field(description="0: immediate, 1: timed, 2: conditional.")
     wayline_type: Int | None = Field(
         default=None, description="0 waypoint, 1 mapping2d, 2 mapping3d, 3 strip."
     )
@@ -165,14 +165,18 @@ class FlighttaskPrepare(InboundModel):
         description="Return-to-home height (m).",
         json_schema_extra={"x-unit": "m"},
     )
-    rth_mode: int_enum(RthMode) | None = Field(default=None, description="0 optimal height, 1 preset height.")
-    out_of_control_action: int_enum(OutOfControlAction) | None = Field(
+    rth_mode: IntEnumField[RthMode] | None = Field(
+        default=None, description="0 optimal height, 1 preset height."
+    )
+    out_of_control_action: IntEnumField[OutOfControlAction] | None = Field(
         default=None, description="0: return home, 1: hover, 2: land."
     )
-    exit_wayline_when_rc_lost: int_enum(ExitWaylineWhenRcLost) | None = Field(
+    exit_wayline_when_rc_lost: IntEnumField[ExitWaylineWhenRcLost] | None = Field(
         default=None, description="0: continue the wayline, 1: exit and do the RC-lost action."
     )
-    wayline_precision_type: int_enum(PrecisionType) | None = Field(default=None, description="0 GPS, 1 RTK.")
+    wayline_precision_type: IntEnumField[PrecisionType] | None = Field(
+        default=None, description="0 GPS, 1 RTK."
+    )
     simulate_mission: SimulateMission | None = None
     flight_safety_advance_check: Int | None = Field(default=None, ge=0, le=1)
 
@@ -219,7 +223,7 @@ class ReturnHomeCancel(EmptyRequest):
 
 class ProgressBreakPoint(OutboundModel):
     index: Int = Field(ge=0, le=65535)
-    state: int_enum(BreakPointState)
+    state: IntEnumField[BreakPointState]
     progress: Float = Field(ge=0, le=1)
     wayline_id: Int = Field(ge=0, le=65535)
     break_reason: Int = Field(ge=0, le=65535, description="Why the task stopped (WAYLINE-NOTES §4.1).")
@@ -233,7 +237,7 @@ class ProgressExt(OutboundModel):
     flight_id: Text
     wayline_id: Int = Field(ge=0, le=65535, description="Folder waylineId; 65535 before a wayline starts.")
     current_waypoint_index: Int = Field(ge=0, description="Waypoints of the wayline executed so far.")
-    wayline_mission_state: int_enum(WaylineMissionState)
+    wayline_mission_state: IntEnumField[WaylineMissionState]
     media_count: Int = Field(ge=0, description="Media files this task produced.")
     track_id: Text = ""
     break_point: ProgressBreakPoint | None = None

@@ -13,12 +13,12 @@ import asyncio
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from adapters.base import DeviceNotConnected, DeviceRejected, DeviceTimeout
 from adapters.osdk.wayline_plan import MISSION_MAX, FcMission, Plan, PlanOptions, plan_route
 from adapters.wayline.kmz import Route
+from adapters.wayline.runner import MissionStopped, Reached
 from schemas.results import ResultCode
 
 if TYPE_CHECKING:
@@ -32,20 +32,9 @@ AUTO_TAKEOFF = 11
 POLL = 0.05
 
 
-class MissionStopped(Exception):
-    """The mission ended short of its last waypoint without an FC error (cancelled, stop_motion)."""
-
-
-@dataclass(frozen=True, slots=True)
-class Reached:
-    """A route waypoint done (its actions run): (wayline_id, index), and photos taken there."""
-
-    ref: tuple[int, int]
-    photos: int
-
-
 class OsdkWayline:
-    """The wayline runner of one :class:`~adapters.osdk.adapter.AircraftAdapter` (one route at a time)."""
+    """The wayline runner (:class:`adapters.wayline.runner.WaylineRunner`) of one
+    :class:`~adapters.osdk.adapter.AircraftAdapter` (one route at a time)."""
 
     def __init__(self, adapter: AircraftAdapter) -> None:
         self.adapter = adapter
@@ -103,11 +92,15 @@ class OsdkWayline:
             return
         await a._flight_task("takeoff")
         deadline = a._now() + timeout
-        t = a.telemetry
-        while not (a.in_air and (t.height or 0.0) >= 1.0 and t.display_mode != AUTO_TAKEOFF):
+        while not self._took_off():
             if a._now() > deadline:
                 raise DeviceTimeout("the aircraft did not take off in time")
             await asyncio.sleep(POLL)
+
+    def _took_off(self) -> bool:
+        """Airborne, at least 1 m up, and the FC's own take-off over (display mode no longer 11)."""
+        a, t = self.adapter, self.adapter.telemetry
+        return a.in_air and (t.height or 0.0) >= 1.0 and t.display_mode != AUTO_TAKEOFF
 
     async def fly(
         self,

@@ -62,6 +62,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from adapters.wayline.kmz import Action, ActionGroup, Placemark, Route
+from adapters.wayline.runner import RouteRefused
 
 log = logging.getLogger(__name__)
 
@@ -77,18 +78,6 @@ WP_STAY, WP_SHOT, WP_VIDEO_START, WP_VIDEO_STOP, WP_CRAFT_YAW, WP_GIMBAL_PITCH =
 _SKIPPED_ACTIONS = frozenset({"focus", "zoom", "customDirName"})
 _YAW_MODES = {"followWayline": 0, "fixed": 1, "manually": 2, "smoothTransition": 3}
 _FINISH = {"noAction": 0, "autoLand": 2, "gotoFirstWaypoint": 3}
-#: Result code for a route the FC cannot fly (314003: "wayline file format not supported").
-NOT_FLYABLE = 314003
-
-
-class RouteRefused(ValueError):
-    """The route cannot be flown: ``break_reason`` (WAYLINE-NOTES §4.1), ``code`` the Cloud API result."""
-
-    def __init__(self, break_reason: int, reason: str, code: int = NOT_FLYABLE) -> None:
-        super().__init__(reason)
-        self.break_reason = break_reason
-        self.reason = reason
-        self.code = code
 
 
 @dataclass(frozen=True, slots=True)

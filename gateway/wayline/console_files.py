@@ -109,7 +109,7 @@ def _cmd_route_demo(ns: argparse.Namespace) -> int:
     return 0
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:
+def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "route-demo",
         help="write a 3-waypoint wayline KMZ around the simulator's home",

@@ -4,9 +4,10 @@ their progress events, and the I/O around the sans-I/O :class:`~gateway.wayline.
 Owns, on the event loop: the KMZ downloads (``fetch.py``), the ``flighttask_resource_get`` request before
 each run (a fresh URL, as docks ask; ``gateway/cloud_requests.py``), the check and parse
 (``adapters.wayline.kmz``), one run per executed task (the aircraft family's runner: an adapter with a
-``wayline`` attribute, ``adapters/osdk/wayline.py``), ``flighttask_progress`` (bid = flight_id, need_reply 1)
-on every change and each second while a task runs, ``flighttask_ready`` for conditional tasks,
-``return_home_info`` while returning, and the task time-outs. Knows nothing of paho or of bytes on a link.
+``wayline`` attribute, :class:`adapters.wayline.runner.WaylineRunner`), ``flighttask_progress``
+(bid = flight_id, need_reply 1) on every change and each second while a task runs,
+``flighttask_ready`` for conditional tasks, ``return_home_info`` while returning, and the task
+time-outs. Knows nothing of paho or of bytes on a link.
 
 Choices where WAYLINE-NOTES is silent (a DJI dock's behaviour where known):
 
@@ -45,10 +46,9 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
 
-from adapters.base import Adapter, DeviceNotConnected, DeviceRejected, DeviceTimeout
-from adapters.osdk.wayline import MissionStopped, Reached
-from adapters.osdk.wayline_plan import RouteRefused
+from adapters.base import DeviceNotConnected, DeviceRejected, DeviceTimeout
 from adapters.wayline.kmz import FILE_FORMAT, KmzError, Route, check_fingerprint, parse_wpml, unpack_wpml
+from adapters.wayline.runner import MissionStopped, Reached, RouteRefused
 from gateway.clock import Clock
 from gateway.cloud_requests import CloudRequestError, CloudRequests
 from gateway.devices import DeviceTable
@@ -126,7 +126,8 @@ class WaylineService:
         self._last_rth_altitude = DEFAULT_RTH_ALTITUDE
 
     # -- the aircraft ----------------------------------------------------------------------------
-    def _aircraft(self) -> Adapter | None:
+    def _aircraft(self) -> Any:
+        """The aircraft that flies waylines (an adapter with a ``wayline`` runner), or None."""
         for adapter in self.devices:
             if getattr(adapter, "wayline", None) is not None:
                 return adapter

@@ -1,0 +1,79 @@
+"""What a wayline service asks of an aircraft family that flies routes, whichever family it is: the
+runner an adapter exposes as its ``wayline`` attribute (:class:`WaylineRunner`), and the values and
+refusals that cross that boundary.
+
+Owns the contract only (no I/O). Knows nothing of MQTT or of any one flight controller: the Onboard SDK's
+runner is ``adapters/osdk/wayline.py``, its mapping ``adapters/osdk/wayline_plan.py``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from adapters.wayline.kmz import Route
+
+__all__ = ["NOT_FLYABLE", "MissionStopped", "Reached", "RouteRefused", "WaylineRunner"]
+
+#: Result code for a route the aircraft cannot fly (314003: "wayline file format not supported").
+NOT_FLYABLE = 314003
+
+
+class RouteRefused(ValueError):
+    """The route cannot be flown: ``break_reason`` (WAYLINE-NOTES §4.1), ``code`` the Cloud API result."""
+
+    def __init__(self, break_reason: int, reason: str, code: int = NOT_FLYABLE) -> None:
+        super().__init__(reason)
+        self.break_reason = break_reason
+        self.reason = reason
+        self.code = code
+
+
+class MissionStopped(Exception):
+    """The mission ended short of its last waypoint without a flight-controller error (cancelled, a stop)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Reached:
+    """A route waypoint done (its actions run): (wayline_id, index), and photos taken there."""
+
+    ref: tuple[int, int]
+    photos: int
+
+
+class WaylineRunner(Protocol):
+    """The ``wayline`` attribute of an adapter whose aircraft flies routes."""
+
+    mission_running: bool
+
+    def plan(
+        self,
+        route: Route,
+        *,
+        rth_altitude: float | None = None,
+        exit_wayline_when_rc_lost: int | None = None,
+        break_point: tuple[int, int, int] | None = None,
+    ) -> Any:
+        """The family's missions for ``route`` from where the aircraft is; RouteRefused if it cannot."""
+        ...
+
+    async def ensure_control(self) -> None: ...
+
+    async def take_off(self, timeout: float) -> None: ...
+
+    async def fly(
+        self, plan: Any, flight_id: str, on_reached: Callable[[Reached], None], on_entered: Callable[[], None]
+    ) -> None: ...
+
+    async def pause(self) -> None: ...
+
+    async def resume(self) -> None: ...
+
+    async def cancel(self) -> None: ...
+
+    def return_home_plan(self, rth_altitude: float) -> list[tuple[float, float, float]]: ...
+
+    async def return_home(
+        self, path: list[tuple[float, float, float]], speed: float, flight_id: str
+    ) -> None: ...
