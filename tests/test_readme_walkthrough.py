@@ -290,9 +290,10 @@ def _check_what_the_reader_saw(
     )
     assert any("mode_code=5(wayline)" in ln for ln in view)
     wait_until(lambda: any("takeoff_to_point_progress" in ln for ln in view), 10, what="progress events")
-    # each need_reply event is shown once: the monitor answered it, the gateway did not re-send it
-    # (drc_status_notify is not answered and may legitimately repeat: a heartbeat failsafe that fires,
-    # clears when a heartbeat comes back, and fires again when the block's heartbeats end)
+    # each event is shown once: the monitor answered it, the gateway did not re-send it. The same
+    # drc_status_notify content may legitimately come twice as two events (a heartbeat failsafe fires,
+    # clears when a heartbeat comes back, and fires again when the block's heartbeats end), so the
+    # check is made on the task's progress events, whose content never repeats
     events = [ln.split("event  ", 1)[1] for ln in view if "event  " in ln]
     answered = [e for e in events if not e.startswith("drc_status_notify ")]
     assert answered and len(answered) == len(set(answered)), "\n".join(events)
