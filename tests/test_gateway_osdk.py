@@ -74,6 +74,33 @@ def _take_off(
     return target
 
 
+def test_takeoff_fields_the_flight_controller_cannot_honour_are_refused(rig: dict[str, Any]) -> None:
+    """Nothing accepted is ignored (issue #16 item 4): an RC-loss action other than the FC's configured
+    failsafe, a go-home altitude outside the FC's 20..500 m, a target over its height limit are refused
+    with 325001 naming the field, before anything is sent; a matching request goes through."""
+    fc, cloud = rig["fc"], rig["cloud"]
+    assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
+    target = _north_east(*HOME, 30.0, 0.0)
+    base = {"target_latitude": target[0], "target_longitude": target[1], "target_height": HOME_ALT + 20.0,
+            "security_takeoff_height": 15.0, "rth_altitude": 30, "flight_id": "f",
+            "max_speed": 12}  # fmt: skip
+    for extra, field in (
+        ({"rc_lost_action": 1}, "rc_lost_action"),  # land; the FC's failsafe is return_home
+        ({"rc_lost_action": 0}, "rc_lost_action"),
+        ({"rth_altitude": 10}, "rth_altitude"),
+        ({"rth_altitude": 501}, "rth_altitude"),
+        ({"target_height": HOME_ALT + 600.0}, "target_height"),
+    ):
+        reply = cloud.service("takeoff_to_point", {**base, **extra})["data"]
+        assert reply["result"] == 325001, (extra, reply)
+        assert reply["output"]["reason"].startswith(field), reply
+    assert fc.inspect(lambda m: (m.actions["flight_task"], m.actions["go_home_altitude_write"])) == (0, 0)
+    assert fc.inspect(lambda m: m.go_home_altitude_m) == 20.0
+    reply = cloud.service("takeoff_to_point", {**base, "rc_lost_action": 2, "rth_altitude": 45})["data"]
+    assert reply["result"] == 0, reply
+    assert fc.inspect(lambda m: (m.actions["flight_task"], m.go_home_altitude_m)) == (1, 45.0)
+
+
 def test_activation_topology_and_osd(rig: dict[str, Any]) -> None:
     fc, cloud = rig["fc"], rig["cloud"]
     assert fc.inspect(lambda m: m.activated) and fc.inspect(lambda m: m.actions["activate"]) >= 1
@@ -103,6 +130,8 @@ def test_takeoff_fly_to_and_stop(rig: dict[str, Any]) -> None:
     assert all(e["flight_id"] == "flight-1" and e["result"] == 0 for e in takeoff())
     # exit_wayline_when_rc_lost 1 reached the mission init: action_on_rc_lost 0 (exit, the FC's failsafe)
     assert fc.inspect(lambda m: m.upload.info["action_on_rc_lost"]) == 0
+    # rth_altitude reached the wire (0x01 0x42): the simulated FC's go-home altitude was 20 m
+    assert fc.inspect(lambda m: (m.actions["go_home_altitude_write"], m.go_home_altitude_m)) == (1, 30.0)
     osd = cloud.wait_for(
         f"{SN}/osd", lambda b: _distance(b["data"]["latitude"], b["data"]["longitude"], *target) < 2.0
     )

@@ -44,7 +44,13 @@ def m100(broker: LocalBroker) -> Iterator[dict[str, Any]]:
     model = Recording(home=HOME, home_altitude=HOME_ALT, firmware="m100")
     device = OsdkFcDevice(model)
     endpoint = TcpEndpoint(device).start()
-    device_settings = {"type": "osdk", "sn": SN, "url": endpoint.url, "firmware": "m100"}
+    device_settings = {
+        "type": "osdk",
+        "sn": SN,
+        "url": endpoint.url,
+        "firmware": "m100",
+        "go_home_altitude": 30,
+    }
     cloud = CloudClient(broker.host, broker.port, GW)
     gw = GatewayThread(gateway_settings(broker.port, [device_settings])).start()
     try:
@@ -95,6 +101,19 @@ def test_an_m100_takes_off_flies_to_a_point_and_never_goes_home(m100: dict[str, 
     seen = fc.inspect(lambda m: list(m.tasks_seen))
     assert "go_home" not in seen and "landing" not in seen, seen
     assert "takeoff" in seen and "waypoint" in seen
+
+
+def test_an_m100_refuses_a_go_home_altitude_it_cannot_be_given(m100: dict[str, Any]) -> None:
+    """Legacy firmware has no command for the go-home altitude: rth_altitude must be the configured one."""
+    fc, cloud = m100["fc"], m100["cloud"]
+    assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
+    target = _north_east(*HOME, 30.0, 0.0)
+    data = {"target_latitude": target[0], "target_longitude": target[1], "target_height": HOME_ALT + 20.0,
+            "security_takeoff_height": 15.0, "rth_altitude": 60, "flight_id": "m100-2",
+            "max_speed": 12}  # fmt: skip
+    reply = cloud.service("takeoff_to_point", data)["data"]
+    assert reply["result"] == 325001 and "go_home_altitude setting (30 m)" in reply["output"]["reason"]
+    assert fc.inspect(lambda m: m.actions["flight_task"]) == 0
 
 
 def test_the_m100_simulator_as_its_own_process_prints_its_port(broker: LocalBroker) -> None:

@@ -123,6 +123,7 @@ def test_table_keys_and_session_rules() -> None:
         ("subscribe_reset", [1], [1]),
         ("subscribe_remove_package", [1], [1]),
         ("subscription_data_push", [None], []),
+        ("go_home_altitude_write", [6], [7, 13]),
     ],
 )
 def test_packed_sizes(name: str, sizes: list[int], ack_sizes: list[int | None]) -> None:
@@ -429,6 +430,27 @@ def test_flight_task_by_firmware() -> None:
     with pytest.raises(LayoutError, match="fits none of flight_task: 1 bytes"):
         decode_request(0x01, 0x01, b"\x09\x04", "new")
     assert c.FLIGHT_TASKS[1] == "takeoff" and c.FLIGHT_TASKS_M100[4] == "takeoff"
+
+
+def test_go_home_altitude_write_bytes() -> None:
+    # DJI Onboard-SDK 3.9 FlightAssistant::setGoHomeAltitude: 0x01 0x42, u32 hash 952919004 (0x38CC63DC)
+    # then the u16 value only; the ACK {u8 ret, u32 hash, u16 value} (GoHomeAltitudeAck), or the value
+    # padded to 8 bytes (ParamAckInternal)
+    assert encode_request("go_home_altitude_write", {"altitude": 60}) == bytes.fromhex("dc63cc38 3c00")
+    assert decode_request(0x01, 0x42, bytes.fromhex("dc63cc38 3c00")).fields == {
+        "hash": c.GO_HOME_ALTITUDE_HASH,
+        "altitude": 60,
+    }
+    ack = c.decode_ack("go_home_altitude_write", bytes.fromhex("00 dc63cc38 3c00"))
+    assert ack.fields == {"ack": 0, "hash": 952919004, "altitude": 60}
+    padded = c.decode_ack("go_home_altitude_write", bytes.fromhex("00 dc63cc38 3c00") + bytes(6))
+    assert padded.fields["altitude"] == 60
+    with pytest.raises(LayoutError, match="hash is fixed"):
+        encode_request("go_home_altitude_write", {"hash": 1, "altitude": 60})
+    with pytest.raises(LayoutError):  # another parameter's hash is not this command
+        decode_request(0x01, 0x42, bytes.fromhex("01000000 3c00"))
+    with pytest.raises(UnknownCommand, match="does not exist on firmware 'm100'"):
+        spec_for("go_home_altitude_write", "m100")
 
 
 def test_kill_switch_layout() -> None:

@@ -85,6 +85,9 @@ AUTO_TAKEOFF = 11  # display mode while the FC's own take-off runs: missions are
 #: 250 m leg silent for its whole 24 s)
 PROGRESS_INTERVAL = 0.5
 EARTH_RADIUS = 6_378_137.0  # m (WGS84 equatorial): the local flat-earth distances of progress events
+MAX_MISSION_POINTS = 255  # the mission init's u8 length (seed 004 0x03 0x10)
+#: takeoff_to_point's rc_lost_action (Cloud API enum) as the ``rc_lost_action`` setting names it
+_RC_LOST_ACTIONS = {0: "hover", 1: "land", 2: "return_home"}
 
 
 @dataclass
@@ -731,8 +734,15 @@ class AircraftAdapter(SupervisedAdapter):
             )
         # A ground-station mission needs at least two waypoints (DJI's minimum): the first is where the
         # aircraft is now, so the cloud's points keep their indexes shifted by one (undone in events).
+        if len(data.points) > MAX_MISSION_POINTS - 1:
+            raise InvalidParameters(
+                f"points: a ground-station mission holds {MAX_MISSION_POINTS} waypoints, one of them where "
+                f"the aircraft is now: at most {MAX_MISSION_POINTS - 1} points"
+            )
         here = (t.latitude or 0.0, t.longitude or 0.0, t.height or 0.0)
         points = [here, *((p.latitude, p.longitude, self._relative(p.height)) for p in data.points)]
+        for index, (_, _, height) in enumerate(points[1:]):
+            self._check_height(f"points[{index}].height", height)
         await self._upload(points, data.max_speed)
         task = Task("fly_to", data.fly_to_id, len(points), offset=1, path=points)
         task.speed = max(1.0, min(float(data.max_speed), self.settings.mission_vel_cmd_range))
@@ -755,10 +765,56 @@ class AircraftAdapter(SupervisedAdapter):
             self._progress(task, "wayline_cancel", task.reached - task.offset)
         return CallResult()
 
+    def _check_height(self, name: str, height: float) -> None:
+        """A height above take-off the FC can fly to (``max_height``, its configured limit)."""
+        if height > self.settings.max_height:
+            raise InvalidParameters(
+                f"{name}: {height:.1f} m above take-off is over this aircraft's limit of "
+                f"{self.settings.max_height:g} m"
+            )
+
+    def _check_takeoff(self, data: Any) -> None:
+        """Refuse (325001, naming the field) what this flight controller cannot honour, before anything
+        is sent: an RC-loss action other than its configured failsafe (the protocol cannot set it), a
+        go-home altitude outside 20..500 m (OSDK's own check) or one an M100 cannot be given, a height
+        over its limit."""
+        s = self.settings
+        wanted = getattr(data, "rc_lost_action", None)
+        if wanted is not None and _RC_LOST_ACTIONS[int(wanted)] != s.rc_lost_action:
+            raise InvalidParameters(
+                f"rc_lost_action: this flight controller's RC-loss failsafe is {s.rc_lost_action} (set in "
+                f"DJI Assistant 2; the Onboard SDK cannot change it), not {_RC_LOST_ACTIONS[int(wanted)]}"
+            )
+        lo, hi = cmds.GO_HOME_ALTITUDE_RANGE
+        if not lo <= data.rth_altitude <= hi:
+            raise InvalidParameters(f"rth_altitude: the flight controller takes {lo}..{hi} m")
+        if self.fw == "m100" and data.rth_altitude != s.go_home_altitude:
+            configured = "not configured" if s.go_home_altitude is None else f"{s.go_home_altitude} m"
+            raise InvalidParameters(
+                "rth_altitude: an M100 cannot be sent a go-home altitude; it must equal the device's "
+                f"go_home_altitude setting ({configured})"
+            )
+        self._check_height("security_takeoff_height", float(data.security_takeoff_height))
+        self._check_height("target_height", self._relative(data.target_height))
+
+    async def _set_go_home_altitude(self, altitude: int) -> None:
+        """0x01 0x42 GO_HOME_ALTITUDE (new firmware): written, and the FC's echo must hold it."""
+        msg = await self.command("go_home_altitude_write", {"altitude": altitude})
+        f = msg.fields
+        if int(f["ack"]) != 0 or f["hash"] != cmds.GO_HOME_ALTITUDE_HASH or int(f["altitude"]) != altitude:
+            raise DeviceRejected(
+                ResultCode.INVALID_PARAMETERS,
+                f"rth_altitude: the flight controller kept a go-home altitude of {f['altitude']} m "
+                f"(ret code {f['ack']})",
+            )
+
     async def _takeoff_to_point(self, data: Any) -> CallResult:
         self._require_online()
         if self.in_air:
             raise DeviceRejected(ResultCode.BUSY, "the aircraft is already in the air")
+        self._check_takeoff(data)
+        if self.fw == "new":
+            await self._set_go_home_altitude(int(data.rth_altitude))
         await self._flight_task("takeoff")
         task = Task("takeoff", data.flight_id, 2)
         self.mission = task

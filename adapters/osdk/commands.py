@@ -715,6 +715,23 @@ KILL_SWITCH = BitLayout(
 )
 LOST_AUTHORITY = Layout((_f("reason", "B", "", "4: RC or mobile app took over"),))
 
+# 0x01 0x42 parameter write by hash (DJI Onboard-SDK 3.9+ FlightAssistant::writeParameterByHash; M210 V2
+# and later firmware; no M100 equivalent): u32 hash, then only the value's own bytes (OSDK sends
+# ``sizeof(hash) + len``). The FC answers u8 ret code (0 = written), the hash and the value it now holds
+# (OSDK's GoHomeAltitudeAck, 7 bytes; its generic ParamAckInternal pads the value to 8 bytes, 13 in all).
+# OSDK refuses a go-home altitude outside MIN_GO_HOME_HEIGHT..MAX_FLIGHT_HEIGHT = 20..500 m before sending.
+GO_HOME_ALTITUDE_HASH = 952919004  # FlightAssistant::ParamHashValue::GO_HOME_ALTITUDE
+GO_HOME_ALTITUDE_RANGE = (20, 500)  # m above the take-off point
+PARAM_ACK: dict[int, str] = {0: "written"}
+GO_HOME_ALTITUDE_WRITE = Layout(
+    (_f("hash", "I", "", "GO_HOME_ALTITUDE_HASH"), _f("altitude", "H", "m", "go-home altitude, 20..500"))
+)
+_GO_HOME_ACK_FIELDS = (_f("ack", "B", "", "0 written"), _f("hash", "I"), _f("altitude", "H", "m"))
+GO_HOME_ALTITUDE_ACKS = (
+    Layout(_GO_HOME_ACK_FIELDS),
+    Layout((*_GO_HOME_ACK_FIELDS, _f("pad", "s", "", "rest of the 8-byte value", count=6))),
+)
+
 
 # --------------------------------------------------------------------------------------------------
 # The table
@@ -816,6 +833,12 @@ _SPECS: tuple[CommandSpec, ...] = (
     CommandSpec(
         "kill_switch", 0x01, 0x06, (KILL_SWITCH,), (U16_ACK,), firmware="new", section=_NOTES_CTL,
         doc="FW >= 3.3; stops motors: a last resort, never on a mere link loss",
+    ),
+    CommandSpec(
+        "go_home_altitude_write", 0x01, 0x42, (GO_HOME_ALTITUDE_WRITE,), GO_HOME_ALTITUDE_ACKS, PARAM_ACK,
+        firmware="new", fixed=types.MappingProxyType({"hash": GO_HOME_ALTITUDE_HASH}),
+        section="OSDK 3.9 dji_flight_assistant_module (parameterWrite 0x01 0x42)",
+        doc="go-home altitude (m above take-off), 20..500; ACK {ret, hash, value now held}",
     ),
     # ---- push set 0x02 (from the flight controller)
     CommandSpec(

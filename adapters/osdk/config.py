@@ -52,3 +52,27 @@ class OsdkDeviceSettings(BaseModel):
         "hover", description="what stop_motion leaves the aircraft doing after the brake"
     )
     release_on_stop: bool = Field(True, description="release SDK control authority when the gateway stops")
+    rc_lost_action: Literal["hover", "land", "return_home"] = Field(
+        "return_home",
+        description=(
+            "the RC-loss failsafe configured on the flight controller (DJI Assistant 2); the Onboard SDK"
+            " protocol cannot change it, so a takeoff_to_point asking for another rc_lost_action is"
+            " refused (325001)"
+        ),
+    )
+    go_home_altitude: int | None = Field(
+        None,
+        ge=20,
+        le=500,
+        description=(
+            "m100 only: the go-home altitude (m) configured in DJI Assistant; legacy firmware has no"
+            " command to write it, so takeoff_to_point's rth_altitude must equal it (unset: refused with"
+            " 325001). New firmware is sent rth_altitude with 0x01 0x42 instead"
+        ),
+    )
+    max_height: float = Field(
+        500.0,
+        gt=0,
+        le=500,
+        description="the flight controller's height limit above take-off (m): higher targets are refused",
+    )

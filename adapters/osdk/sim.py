@@ -46,6 +46,8 @@ Choices where the protocol is silent (also next to the code that makes them):
 * ``rc_takeover()`` always pushes ``0x02 0x01`` (reason 4) on an ACK-required session (resent
   0.5 s x 2 until the host ACKs), revokes SDK control, flips the RC switch to P and hovers.
 * Releasing control does not stop a running mission; landing and go home cancel it.
+* The go-home altitude (``go_home_altitude_m``, 20 m by default) is written with ``0x01 0x42`` (new
+  firmware; the value only, hash-checked); go home climbs to it (or stays higher) before flying home.
 
 Flight model: a point mass with a 4 m/s^2 acceleration limit on a flat earth around ``home``
 (north/east metres; latitude = home + north / R, longitude = home + east / (R cos(home lat)),
@@ -166,6 +168,7 @@ _BAD_PAYLOAD_ACK: dict[str, int] = {
     "activate": 0x0001,
     "set_broadcast_frequency": 0x0001,
     "flight_task": 10,
+    "go_home_altitude_write": 1,  # another hash or length: not written (not confirmed on hardware)
 } | sub.BAD_PAYLOAD_ACK
 _GS_INVALID = 0xF4
 
@@ -669,6 +672,17 @@ class OsdkFcModel:
         self.motors_on = False
         self.task = "ground"
         return 0
+
+    def _on_go_home_altitude_write(self, f: dict[str, Any], now: float) -> dict[str, Any]:
+        """0x01 0x42 with the go-home altitude's hash: the value is held and used by the next go home.
+        Outside 20..500 m (OSDK checks this before sending; what a real FC answers is not documented)
+        the simulator answers ret code 1 and keeps its value; the ACK always carries the value held."""
+        lo, hi = cmds.GO_HOME_ALTITUDE_RANGE
+        ok = lo <= f["altitude"] <= hi
+        if ok:
+            self.go_home_altitude_m = float(f["altitude"])
+        held = round(self.go_home_altitude_m)
+        return {"ack": 0 if ok else 1, "hash": f["hash"], "altitude": held}
 
     def _exit(self, task: str) -> int:
         if self.task != task:
@@ -1613,6 +1627,9 @@ def in_process(device: Any) -> tuple[InProcessSim, Any] | None:
     entry names (new or m100), and the entry pointed at it. Any other entry: None."""
     if device.url != SIM_URL:
         return None
-    endpoint = TcpEndpoint(OsdkFcDevice(OsdkFcModel(firmware=device.firmware))).start()
+    # an M100's go-home altitude is the one its entry states (the simulated FC holds it)
+    held = device.go_home_altitude
+    extra = {} if held is None else {"go_home_altitude_m": float(held)}
+    endpoint = TcpEndpoint(OsdkFcDevice(OsdkFcModel(firmware=device.firmware, **extra))).start()
     log.info("simulated aircraft %s at %s", device.sn, endpoint.url)
     return endpoint, device.model_copy(update={"url": endpoint.url})
