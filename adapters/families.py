@@ -89,6 +89,7 @@ class CliOption:
     help: str
     choices: tuple[str, ...] | None = None
     integer: bool = False  # parsed with int(text, 0): 0x… accepted
+    commands: tuple[str, ...] = ("decode", "encode")  # which of the two take it
 
 
 @dataclass(frozen=True, slots=True)
@@ -167,6 +168,15 @@ BUILTIN: tuple[Family, ...] = (
         describe="adapters.rsdk.describe",
         simulator="adapters.rsdk.sim",
         extensions="adapters.rsdk.extensions",
+        cli_options=(
+            CliOption(
+                "--angle-order",
+                "angle_order",
+                "rsdk: angle order of legacy-firmware 0x0E 0x02 replies (default the seed's yaw_roll_pitch)",
+                choices=("yaw_roll_pitch", "yaw_pitch_roll"),
+                commands=("decode",),
+            ),
+        ),
         # a gimbal on a virtual CAN bus of its own, with its in-process simulator
         tour={
             "type": "rsdk",

@@ -72,7 +72,7 @@ def run_decode(ns: argparse.Namespace, stdin: TextIO, stdout: TextIO) -> int:
     mod = _describe(ns.protocol)
     text = _read_input(ns.hex, stdin)
     if hasattr(mod, "decode_can_lines") and _looks_like_candump(text):
-        records = mod.decode_can_lines(text)
+        records = mod.decode_can_lines(text, **_options(ns))  # e.g. rsdk --angle-order: candump too
     else:
         try:
             data = _hex_to_bytes(text.split())
@@ -138,7 +138,7 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
     )
     dec.add_argument("protocol", choices=families.names())
     dec.add_argument("hex", nargs="*", help="hex bytes; '-' or nothing reads stdin")
-    _family_options(dec)
+    _family_options(dec, "decode")
     dec.set_defaults(handler=lambda ns: run_decode(ns, sys.stdin, sys.stdout), trailing=("hex", _is_hex_word))
 
     enc = sub.add_parser("encode", help="encode one command as a frame (hex)")
@@ -147,14 +147,16 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
     enc.add_argument("--seq", type=lambda s: int(s, 0), default=0)
     enc.add_argument("--can", action="store_true", help="rsdk: print the CAN split as ID#DATA lines")
     enc.add_argument("fields", nargs="*", help="field=value (JSON values; hex strings for bytes)")
-    _family_options(enc)
+    _family_options(enc, "encode")
     enc.set_defaults(
         handler=lambda ns: run_encode(ns, sys.stdout, sys.stderr), trailing=("fields", is_assignment)
     )
 
 
-def _family_options(p: argparse.ArgumentParser) -> None:
+def _family_options(p: argparse.ArgumentParser, command: str) -> None:
     for option in _cli_options():
+        if command not in option.commands:
+            continue
         parse: dict[str, Any] = {"type": _integer} if option.integer else {}
         p.add_argument(
             option.flag, dest=option.option, choices=option.choices, default=None, help=option.help, **parse

@@ -135,3 +135,17 @@ def test_bench_quick_runs_and_checks_itself() -> None:
     )
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert "frames/s" in proc.stdout
+
+
+def test_decode_rsdk_legacy_angle_order(capsys: pytest.CaptureFixture[str]) -> None:
+    from adapters.rsdk import commands as cmds
+
+    ask = cmds.encode_command("get_angle", 9, {"ctrl_byte": 1}).hex()
+    fields = {"return_code": 0, "data_type": 1, "yaw": 300, "roll": 50, "pitch": 200}
+    reply = cmds.encode_command("get_angle", 9, fields, reply=True, legacy=True).hex()
+    code, lines = run(capsys, "decode", "rsdk", ask, reply)
+    seed = json.loads(lines[1])
+    assert code == 0 and seed["legacy"] and (seed["fields"]["roll"], seed["fields"]["pitch"]) == (50, 200)
+    code, lines = run(capsys, "decode", "rsdk", "--angle-order", "yaw_pitch_roll", ask, reply)
+    other = json.loads(lines[1])
+    assert code == 0 and (other["fields"]["roll"], other["fields"]["pitch"]) == (200, 50)

@@ -65,6 +65,36 @@ def test_gimbal_on_legacy_firmware_replies(broker: LocalBroker, can_channel: str
     sim.stop()
 
 
+@pytest.mark.parametrize(
+    ("gimbal_order", "setting", "expected"),
+    [
+        ("yaw_roll_pitch", None, (5.0, 20.0)),  # seed 000's order, the default
+        ("yaw_pitch_roll", "yaw_pitch_roll", (5.0, 20.0)),  # ArduPilot's reading of older firmware
+        ("yaw_pitch_roll", None, (20.0, 5.0)),  # a gimbal that answers otherwise than configured
+    ],
+)
+def test_legacy_angle_replies_in_the_configured_order(
+    broker: LocalBroker,
+    can_channel: str,
+    gimbal_order: str,
+    setting: str | None,
+    expected: tuple[float, float],
+) -> None:
+    """Issue #16 item 8: a legacy-firmware 0x0E 0x02 reply is read in the gimbal's legacy_angle_order."""
+    model = GimbalModel(legacy_replies=True, legacy_angle_order=gimbal_order)
+    model.yaw.angle, model.roll.angle, model.pitch.angle = 30.0, 5.0, 20.0
+    sim = GimbalCanSim(GimbalNode(model), interface="virtual", channel=can_channel).start()
+    cloud = CloudClient(broker.host, broker.port, GW)
+    gimbal = _gimbal(can_channel) | ({} if setting is None else {"legacy_angle_order": setting})
+    settings = gateway_settings(broker.port, [gimbal], dispatcher={"require_authority": False})
+    with GatewayThread(settings):
+        cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1)
+        out = cloud.service("x_rsdk_angle_get", {"payload_index": "1001-0-0"})["data"]["output"]
+        assert (out["kind"], out["yaw"], (out["roll"], out["pitch"])) == ("attitude", 30.0, expected)
+    cloud.close()
+    sim.stop()
+
+
 def test_mqtt_311_and_tcp_nodelay(broker: LocalBroker, can_channel: str) -> None:
     sim = GimbalCanSim(interface="virtual", channel=can_channel).start()
     cloud = CloudClient(broker.host, broker.port, GW)

@@ -560,3 +560,31 @@ def test_describe_version_text_and_options() -> None:
         describe.encode_command("get_angle", 1, {"ctrl_byte": 1}, bogus=1)
     with pytest.raises(ValueError, match="valid:"):
         describe.decode_bytes(rep, reply_to="nope")
+
+
+def test_legacy_angle_reply_in_either_order() -> None:
+    """Seed 000 §2.3.4.3: reply data = return code, data_type, yaw, roll, pitch (int16 LE, 0.1°). A legacy
+    reply (no CmdSet/CmdID) from older firmware may carry yaw, pitch, roll (ArduPilot's reading)."""
+    from adapters.rsdk import commands as cmds
+    from adapters.rsdk.protocol import Decoder
+
+    # yaw 30.0°, second slot 5.0°, third slot 20.0°
+    data = bytes.fromhex("00 01 2c01 3200 c800")
+    legacy = cmds.encode_command("get_angle", 7, {"return_code": 0, "data_type": 1, "yaw": 300, "roll": 50,
+                                                  "pitch": 200}, reply=True, legacy=True)  # fmt: skip
+    swapped = cmds.encode_command("get_angle", 7, {"return_code": 0, "data_type": 1, "yaw": 300, "roll": 200,
+                                                   "pitch": 50}, reply=True, legacy=True,
+                                  angle_order="yaw_pitch_roll")  # fmt: skip
+    assert legacy == swapped  # the same bytes: roll 5° / pitch 20° vs roll 20° / pitch 5°
+    frame = Decoder().feed(legacy)[0]
+    assert frame.data == data
+    seed = cmds.decode_reply(frame, 0x0E, 0x02)
+    assert seed.legacy and (seed.fields["roll"], seed.fields["pitch"]) == (50, 200)
+    other = cmds.decode_reply(frame, 0x0E, 0x02, angle_order="yaw_pitch_roll")
+    assert (other.fields["yaw"], other.fields["roll"], other.fields["pitch"]) == (300, 200, 50)
+    # the latest form follows the seed whatever the setting
+    fields = {"return_code": 0, "data_type": 1, "yaw": 300, "roll": 50, "pitch": 200}
+    latest = Decoder().feed(cmds.encode_command("get_angle", 8, fields, reply=True))[0]
+    assert cmds.decode_reply(latest, 0x0E, 0x02, angle_order="yaw_pitch_roll").fields["roll"] == 50
+    with pytest.raises(cmds.CommandError, match="legacy angle order"):
+        cmds.decode_reply(frame, 0x0E, 0x02, angle_order="pitch_yaw_roll")

@@ -150,6 +150,7 @@ class GimbalAdapter(SupervisedAdapter):
             "x_rsdk_focus_set": self._x_focus,
             "x_rsdk_auto_calibration": self._x_calibration,
             "x_rsdk_version_get": self._x_version,
+            "x_rsdk_angle_get": self._x_angle,
         }
 
     # -- life cycle -------------------------------------------------------------------------------
@@ -268,7 +269,9 @@ class GimbalAdapter(SupervisedAdapter):
                 return
             del self._pending[frame.seq]
             try:
-                msg = decode_reply(frame, p.cmd_set, p.cmd_id, p.name)
+                msg = decode_reply(
+                    frame, p.cmd_set, p.cmd_id, p.name, angle_order=self.settings.legacy_angle_order
+                )
             except CommandError as exc:
                 if not p.future.done():
                     p.future.set_exception(DeviceRejected(ResultCode.BUSY, f"unreadable reply: {exc}"))
@@ -617,6 +620,16 @@ class GimbalAdapter(SupervisedAdapter):
         item = {"id": 0x00, "value": (SELF_TUNING_TYPE << 1) | (0x01 if data.start else 0x00)}
         await self._command("auto_calibration", {"tlv_buffer": [item]}, ResultCode.BUSY)
         return CallResult()
+
+    async def _x_angle(self, data: Any) -> CallResult:
+        """0x0E 0x02; a legacy-firmware reply is read in this gimbal's ``legacy_angle_order``."""
+        msg = await self._command("get_angle", {"ctrl_byte": 0x02 if data.joint else 0x01}, ResultCode.BUSY)
+        assert msg is not None  # get_angle has a reply frame
+        f = msg.fields
+        if f["data_type"] == 0x00:
+            raise DeviceRejected(ResultCode.BUSY, "the gimbal's angle data is not ready")
+        kind = "joint" if f["data_type"] == 0x02 else "attitude"
+        return CallResult(0, {"kind": kind, **{axis: f[axis] / 10 for axis in ("yaw", "roll", "pitch")}})
 
     async def _x_version(self, data: Any) -> CallResult:
         msg = await self._command("get_version", {"device_id": SDK_DEVICE_ID}, ResultCode.BUSY)

@@ -846,6 +846,34 @@ assert len(BY_NAME) == len(_ENTRIES), "command names must be unique"
 COMMANDS: list[str] = list(BY_NAME)
 
 
+# Legacy-firmware angle replies (issue #16 item 8). Seed 000 §2.3.4.3 (0x0E 0x02 "obtain gimbal
+# information") gives one reply layout, byte by byte: 0 return code, 1 data_type, 2-3 yaw, 4-5 roll,
+# 6-7 pitch (int16, 0.1°), and says nothing of a different order in the pre-2.2.0.5 reply form (which only
+# lacks CmdSet/CmdID). ArduPilot's DJI RS2 driver (libraries/AP_Scripting/drivers/mount-djirs2-driver.lua)
+# reads a *legacy* attitude reply as yaw, pitch, roll and the latest one as yaw, roll, pitch, and tells
+# users whose mount reads wrong to update the gimbal to 01.04.00.20 or later. So the order of a legacy
+# reply is a per-gimbal setting; the default is the seed's. Only the legacy form of get_angle is affected.
+LEGACY_ANGLE_ORDERS: tuple[str, ...] = ("yaw_roll_pitch", "yaw_pitch_roll")
+SEED_ANGLE_ORDER = "yaw_roll_pitch"
+#: command -> order -> the two reply fields whose wire slots are swapped relative to the table's layout
+_LEGACY_SWAPS: dict[str, dict[str, tuple[str, str]]] = {"get_angle": {"yaw_pitch_roll": ("roll", "pitch")}}
+
+
+def _check_angle_order(order: str) -> None:
+    if order not in LEGACY_ANGLE_ORDERS:
+        raise CommandError(f"legacy angle order {order!r}; valid: {', '.join(LEGACY_ANGLE_ORDERS)}")
+
+
+def _swap_legacy(name: str, fields: Mapping[str, Any], order: str) -> dict[str, Any]:
+    """The fields with the legacy order's slots swapped (the swap is its own inverse: used both ways)."""
+    _check_angle_order(order)
+    out = dict(fields)
+    pair = _LEGACY_SWAPS.get(name, {}).get(order)
+    if pair is not None and pair[0] in out and pair[1] in out:
+        out[pair[0]], out[pair[1]] = out[pair[1]], out[pair[0]]
+    return out
+
+
 @dataclass(frozen=True, slots=True)
 class Message:
     """A decoded command, push or reply: ``fields`` maps the seed's names to wire-unit values.
@@ -894,15 +922,19 @@ def build_frame(
     reply: bool = False,
     legacy: bool = False,
     cmd_type: int | None = None,
+    angle_order: str = SEED_ANGLE_ORDER,
 ) -> Frame:
     """The :class:`Frame` for a table command (or, with ``reply``, its reply; with ``legacy`` too, in
-    the old format without CmdSet/CmdID). Command frames get CmdType 0x03 (reply required), or 0x00
-    when the seed says no reply frame comes; replies get reply type 0 unless ``cmd_type`` says."""
+    the old format without CmdSet/CmdID, its angles in ``angle_order``). Command frames get CmdType 0x03
+    (reply required), or 0x00 when the seed says no reply frame comes; replies get reply type 0 unless
+    ``cmd_type`` says."""
     spec = lookup(command, reply=reply)
     codec = spec.reply if reply else spec.command
     if codec is None:
         raise CommandError(f"{spec.name} has no reply frame (seed §{spec.section})")
     values = {**spec.when, **fields} if not reply else dict(fields)
+    if reply and legacy:
+        values = _swap_legacy(spec.name, values, angle_order)
     try:
         payload = encode_payload(codec, values)
     except LayoutError as e:
@@ -922,10 +954,14 @@ def encode_command(
     reply: bool = False,
     legacy: bool = False,
     cmd_type: int | None = None,
+    angle_order: str = SEED_ANGLE_ORDER,
 ) -> bytes:
     """Frame bytes for a table command by name or (cmd_set, cmd_id); see :func:`build_frame`."""
     try:
-        return encode(build_frame(command, seq, fields, reply=reply, legacy=legacy, cmd_type=cmd_type))
+        frame = build_frame(
+            command, seq, fields, reply=reply, legacy=legacy, cmd_type=cmd_type, angle_order=angle_order
+        )
+        return encode(frame)
     except CommandError:
         raise
     except ValueError as e:  # frame-level limits (seq range, frame too long)
@@ -978,8 +1014,18 @@ def decode_message(frame: Frame) -> Message:
     raise CommandError("; ".join(errors))
 
 
-def decode_reply(frame: Frame, cmd_set: int, cmd_id: int, name: str | None = None) -> Message:
+def decode_reply(
+    frame: Frame,
+    cmd_set: int,
+    cmd_id: int,
+    name: str | None = None,
+    *,
+    angle_order: str = SEED_ANGLE_ORDER,
+) -> Message:
     """Decode a reply against the command it answers (the sent frame with the same SEQ).
+
+    ``angle_order``: how this gimbal's legacy-form angle replies are laid out (``LEGACY_ANGLE_ORDERS``;
+    default the seed's yaw, roll, pitch). Latest-form replies always follow the seed.
 
     Latest format: data = CmdSet CmdID (equal to the sent command's) + reply payload. Legacy format
     (firmware before 2.2.0.5): data = reply payload only, 2 bytes shorter. The two are told apart by
@@ -1004,7 +1050,8 @@ def decode_reply(frame: Frame, cmd_set: int, cmd_id: int, name: str | None = Non
         except LayoutError as e:
             latest_err = str(e)
     try:
-        return Message(spec.name, cmd_set, cmd_id, True, _decode_with(spec.reply, data), legacy=True)
+        fields = _swap_legacy(spec.name, _decode_with(spec.reply, data), angle_order)
+        return Message(spec.name, cmd_set, cmd_id, True, fields, legacy=True)
     except LayoutError as e:
         raise CommandError(
             f"{spec.name} reply fits neither format: latest: {latest_err}; legacy: {e}"

@@ -39,6 +39,13 @@ class RsdkDeviceSettings(BaseModel):
     drag_hold: float = Field(0.5, gt=0, le=5, description="a drag lasts this long after its last message")
     drag_rate_hz: float = Field(10.0, ge=10, le=50, description="speed control refresh while a drag lasts")
     max_speed_dps: float = Field(360.0, gt=0, le=360, description="fastest drag accepted (°/s)")
+    legacy_angle_order: Literal["yaw_roll_pitch", "yaw_pitch_roll"] = Field(
+        "yaw_roll_pitch",
+        description=(
+            "order of the angles in a legacy-firmware (pre-2.2.0.5 reply form) 0x0E 0x02 reply: seed 000's"
+            " yaw_roll_pitch, or yaw_pitch_roll as ArduPilot's RS2 driver reads older gimbal firmware"
+        ),
+    )
     drc_drive: bool = Field(
         False, description="live control (DRC) sticks drive this gimbal: w → yaw, h → pitch"
     )

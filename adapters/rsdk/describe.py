@@ -3,7 +3,8 @@
 Used by ``gateway/cli.py`` (``decode``/``encode``); everything derives from the command table.
 Replies are matched to the commands seen earlier in the same input by SEQ, so a legacy reply (no
 CmdSet/CmdID) is decoded against the command it answers; ``reply_to=<command name>`` covers replies
-whose command is not in the input. Must not know MQTT, the gateway or any bus library.
+whose command is not in the input; ``angle_order`` says how a legacy angle reply is laid out
+(``commands.LEGACY_ANGLE_ORDERS``, default the seed's). Must not know MQTT, the gateway or any bus library.
 """
 
 from __future__ import annotations
@@ -32,9 +33,10 @@ _TEXTS: dict[str, Callable[[int], str]] = {
 class _Session:
     """Decodes frames of one input in order, remembering sent commands by SEQ for their replies."""
 
-    def __init__(self, reply_to: str | None) -> None:
+    def __init__(self, reply_to: str | None, angle_order: str | None = None) -> None:
         self.reply_to = cmds.lookup(reply_to) if reply_to is not None else None
         self.sent: dict[int, tuple[int, int, str]] = {}
+        self.angle_order = angle_order or cmds.SEED_ANGLE_ORDER
 
     def describe(self, item: Frame | BadFrame) -> dict[str, Any]:
         if isinstance(item, BadFrame):
@@ -83,22 +85,25 @@ class _Session:
             return msg
         sent = self.sent.get(frame.seq)
         if sent is not None:
-            return cmds.decode_reply(frame, *sent)
+            return cmds.decode_reply(frame, *sent, angle_order=self.angle_order)
         if self.reply_to is not None:
             spec = self.reply_to
-            return cmds.decode_reply(frame, spec.cmd_set, spec.cmd_id, spec.name)
+            return cmds.decode_reply(
+                frame, spec.cmd_set, spec.cmd_id, spec.name, angle_order=self.angle_order
+            )
         return cmds.decode_message(frame)
 
 
 def decode_bytes(data: bytes, **options: Any) -> list[dict[str, Any]]:
     """One dict per frame or BadFrame, in order. Options: ``can`` (data is candump text, see
-    :func:`decode_can_lines`), ``reply_to`` (command name for replies whose command is not in the input)."""
-    check_options(options, {"can", "reply_to", "host_id", "gimbal_id"}, "rsdk")
+    :func:`decode_can_lines`), ``reply_to`` (command name for replies whose command is not in the input),
+    ``angle_order`` (legacy angle replies: ``yaw_roll_pitch``, the seed's, or ``yaw_pitch_roll``)."""
+    check_options(options, {"can", "reply_to", "host_id", "gimbal_id", "angle_order"}, "rsdk")
     if options.get("can"):
         rest = {k: v for k, v in options.items() if k != "can"}
         return decode_can_lines(bytes(data).decode("utf-8", errors="replace"), **rest)
-    check_options(options, {"can", "reply_to"}, "rsdk")
-    session = _Session(options.get("reply_to"))
+    check_options(options, {"can", "reply_to", "angle_order"}, "rsdk")
+    session = _Session(options.get("reply_to"), options.get("angle_order"))
     decoder = Decoder()
     items = decoder.feed(data) + decoder.flush()
     return [session.describe(item) for item in items]
@@ -107,8 +112,8 @@ def decode_bytes(data: bytes, **options: Any) -> list[dict[str, Any]]:
 def decode_can_lines(text: str, **options: Any) -> list[dict[str, Any]]:
     """Decode candump text (screen or log format). Frames on ``gimbal_id`` (0x222) and ``host_id``
     (0x223) are reassembled per id; each dict also has ``can_id``. Other ids are skipped."""
-    check_options(options, {"reply_to", "host_id", "gimbal_id"}, "rsdk")
-    session = _Session(options.get("reply_to"))
+    check_options(options, {"reply_to", "host_id", "gimbal_id", "angle_order"}, "rsdk")
+    session = _Session(options.get("reply_to"), options.get("angle_order"))
     ids = (int(options.get("host_id", HOST_TX_ID)), int(options.get("gimbal_id", GIMBAL_TX_ID)))
     reassemblers = {i: Reassembler(i) for i in ids}
     out: list[dict[str, Any]] = []
@@ -130,9 +135,11 @@ def decode_can_lines(text: str, **options: Any) -> list[dict[str, Any]]:
 
 def encode_command(command: str, seq: int, fields: dict[str, Any], **options: Any) -> bytes:
     """Frame bytes for a table command. Options: ``reply`` (encode its reply, as the gimbal would),
-    ``legacy`` (that reply in the old format), ``cmd_type`` (override the CmdType reply type).
-    Unknown command or field -> ValueError listing the valid names."""
-    check_options(options, {"reply", "legacy", "cmd_type"}, "rsdk")
+    ``legacy`` (that reply in the old format, its angles in ``angle_order``), ``cmd_type`` (override the
+    CmdType reply type). Unknown command or field -> ValueError listing the valid names."""
+    check_options(options, {"reply", "legacy", "cmd_type", "angle_order"}, "rsdk")
+    if options.get("angle_order") and not (options.get("reply") and options.get("legacy")):
+        raise ValueError("angle_order applies to legacy replies only (reply and legacy)")
     return cmds.encode_command(
         command,
         seq,
@@ -140,13 +147,14 @@ def encode_command(command: str, seq: int, fields: dict[str, Any], **options: An
         reply=bool(options.get("reply", False)),
         legacy=bool(options.get("legacy", False)),
         cmd_type=options.get("cmd_type"),
+        angle_order=options.get("angle_order") or cmds.SEED_ANGLE_ORDER,
     )
 
 
 def encode_can(command: str, seq: int, fields: dict[str, Any], **options: Any) -> list[tuple[int, bytes]]:
     """The CAN frames for :func:`encode_command`; ``arb_id`` defaults to 0x223 for commands and 0x222
     for replies (``reply=True``)."""
-    check_options(options, {"reply", "legacy", "cmd_type", "arb_id"}, "rsdk")
+    check_options(options, {"reply", "legacy", "cmd_type", "arb_id", "angle_order"}, "rsdk")
     rest = {k: v for k, v in options.items() if k != "arb_id"}
     default_id = GIMBAL_TX_ID if options.get("reply") else HOST_TX_ID
     return segment(encode_command(command, seq, fields, **rest), int(options.get("arb_id", default_id)))

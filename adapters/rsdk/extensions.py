@@ -104,6 +104,24 @@ class AutoCalibration(PayloadRequest):
     start: Bool
 
 
+class AngleGet(PayloadRequest):
+    """Read the gimbal's angles with 0x0E 0x02 (seed 000 §2.3.4.3): attitude (default) or joint angles."""
+
+    joint: Bool = Field(default=False, description="false: attitude angles (0x01); true: joint angles (0x02)")
+
+
+class AngleOut(OutboundModel):
+    kind: str = Field(description="attitude or joint (the reply's data_type)")
+    yaw: Float
+    roll: Float
+    pitch: Float
+
+
+class AngleReply(OutboundModel):
+    result: ResultValue
+    output: AngleOut | ErrorOutput | None = None
+
+
 class VersionOut(OutboundModel):
     device_id: Int
     version: str
@@ -127,4 +145,5 @@ EXTENSIONS: tuple[tuple[str, type[PayloadRequest], type[OutboundModel], str], ..
     ("x_rsdk_focus_set", FocusPosition, ResultReply, "R SDK: focus motor absolute position"),
     ("x_rsdk_auto_calibration", AutoCalibration, ResultReply, "R SDK: start or stop self-tuning"),
     ("x_rsdk_version_get", PayloadRequest, VersionReply, "R SDK: gimbal firmware version"),
+    ("x_rsdk_angle_get", AngleGet, AngleReply, "R SDK: read attitude or joint angles (0x0E 0x02)"),
 )

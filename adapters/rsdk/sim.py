@@ -114,6 +114,9 @@ class GimbalModel:
     """The gimbal's state and its answers. Time is passed in; nothing here sleeps or reads a clock."""
 
     legacy_replies: bool = False
+    #: with ``legacy_replies``: the angle order of a 0x0E 0x02 reply (commands.LEGACY_ANGLE_ORDERS): the
+    #: seed's yaw_roll_pitch, or yaw_pitch_roll as ArduPilot reads older gimbal firmware
+    legacy_angle_order: str = "yaw_roll_pitch"
     version: int = DEFAULT_VERSION
     yaw: Axis = field(default_factory=lambda: Axis(0.0, -180.0, 180.0))
     roll: Axis = field(default_factory=lambda: Axis(0.0, -30.0, 30.0))
@@ -230,7 +233,10 @@ class GimbalModel:
 
     def _reply(self, name: str, seq: int, fields: dict[str, Any]) -> bytes:
         seq = (seq + self.faults.seq_offset) & 0xFFFF
-        return encode(build_frame(name, seq, fields, reply=True, legacy=self.legacy_replies))
+        frame = build_frame(
+            name, seq, fields, reply=True, legacy=self.legacy_replies, angle_order=self.legacy_angle_order
+        )
+        return encode(frame)
 
     def _reply_raw(self, frame: Frame, code: int, now: float) -> list[bytes]:
         if frame.key is None:
@@ -498,6 +504,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     p.add_argument("--legacy-replies", action="store_true", help="answer in the pre-2.2.0.5 reply format")
     p.add_argument(
+        "--legacy-angle-order",
+        choices=("yaw_roll_pitch", "yaw_pitch_roll"),
+        default="yaw_roll_pitch",
+        help="with --legacy-replies: the angle order of 0x0E 0x02 replies (default the seed's)",
+    )
+    p.add_argument(
         "--fault",
         action="append",
         default=[],
@@ -510,7 +522,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         faults = ReplyFaults.parse(ns.fault)
     except ValueError as exc:
         p.error(str(exc))
-    model = GimbalModel(legacy_replies=ns.legacy_replies, faults=faults)
+    model = GimbalModel(
+        legacy_replies=ns.legacy_replies, legacy_angle_order=ns.legacy_angle_order, faults=faults
+    )
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
