@@ -14,11 +14,13 @@ DEVICE_MODEL_CONFIG = ConfigDict(extra="forbid", frozen=True)
 
 
 class ProductSettings(BaseModel):
-    """What ``update_topo`` says about a device: the Cloud API product enumeration."""
+    """What ``update_topo`` says about a device: the Cloud API product enumeration (domain, type,
+    sub_type). The defaults are the gateway's own: DJI RC Plus, ``2-119-0``, the gateway DJI Pilot 2 runs
+    on for the Onboard-SDK airframes (docs/cloud-api.md "Device identity"); each family sets its own."""
 
     model_config = DEVICE_MODEL_CONFIG
-    domain: str = "3"
-    type: int = 1001
+    domain: str = "2"
+    type: int = 119
     sub_type: int = 0
     thing_version: str = "1.1.2"
     device_secret: SecretStr | None = None

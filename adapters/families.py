@@ -181,7 +181,7 @@ BUILTIN: tuple[Family, ...] = (
         tour={
             "type": "rsdk",
             "sn": "RSDK-SIM-0001",
-            "payload_index": "1001-0-0",
+            "payload_index": "20-0-0",
             "interface": "virtual",
             "channel": "djigw-sim-RSDK-SIM-0001",
             "drc_drive": True,  # live-control sticks turn it (with payload authority): docs/drc.md
@@ -212,7 +212,7 @@ BUILTIN: tuple[Family, ...] = (
         tour={
             "type": "robomaster",
             "sn": "RM-SIM-0001",
-            "payload_index": "1002-0-0",
+            "payload_index": "39-0-7",
             "url": "sim://robomaster",
         },
         cli_options=(

@@ -156,7 +156,7 @@ def _gateway(broker: LocalBroker, sn: str, console: bool) -> tuple[GatewayThread
     gimbal = {
         "type": "rsdk",
         "sn": GIMBAL,
-        "payload_index": "1001-0-0",
+        "payload_index": "20-0-0",
         "interface": "virtual",
         "channel": channel,
     }
@@ -208,7 +208,7 @@ def _round_trips(broker: LocalBroker, n: int, rounds: int) -> dict[str, tuple[li
                                 "bid": "bench",
                                 "timestamp": 0,
                                 "method": "x_rsdk_version_get",
-                                "data": {"payload_index": "1001-0-0"},
+                                "data": {"payload_index": "20-0-0"},
                             }
                             ms = timers[on].round_trip(
                                 f"thing/product/{sn}/services", json.dumps(msg).encode(), tid

@@ -35,7 +35,7 @@ from gateway.settings import load_settings
 from tests.support import BusSniffer, GatewayThread
 
 GW = "GW-BENCH-DRC"
-PI = "1001-0-0"
+PI = "20-0-0"
 
 
 def _client(port: int, name: str) -> paho.Client:

@@ -126,9 +126,9 @@ def run(cfg: Config) -> list[Row]:
         timer = _Timer(broker.port, f"thing/product/{GW}/services_reply")
         through: dict[str, list[float]] = {}
         for method, data in (
-            ("x_rsdk_version_get", {"payload_index": "1001-0-0"}),  # a real R SDK command and reply
+            ("x_rsdk_version_get", {"payload_index": "20-0-0"}),  # a real R SDK command and reply
             # answered by the gateway itself: an R SDK gimbal takes no frame for payload authority
-            ("payload_authority_grab", {"payload_index": "1001-0-0"}),
+            ("payload_authority_grab", {"payload_index": "20-0-0"}),
         ):
             samples = through[method] = []
             for i in range(n + 50):

@@ -30,7 +30,7 @@ from tests.nats_cluster import NatsCluster, nats_version
 from tests.support import GatewayThread, gateway_settings, wait_until
 
 GW = "GW-CLUSTER-1"
-PI = "1001-0-0"
+PI = "20-0-0"
 
 
 class Cloud:

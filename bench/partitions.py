@@ -37,7 +37,7 @@ from tests.netlab import LinkEmulator, VethLink, enter_netns, netem_problem, net
 from tests.support import DrcSticks, GatewayThread, answer_event, gateway_settings
 
 GW = "GW-CELL-1"
-PI = "1001-0-0"
+PI = "20-0-0"
 LTE = {"delay_ms": 40.0, "jitter_ms": 10.0, "loss": 0.01}  # each direction: 80 ms RTT ± 20 ms, 1 % loss
 
 

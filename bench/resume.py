@@ -31,7 +31,7 @@ from gateway.local_broker import LocalBroker, port_open
 from gateway.mqtt import close_client
 
 GW = "GW-RESUME-1"
-PI = "1001-0-0"
+PI = "20-0-0"
 
 
 @dataclass(frozen=True, slots=True)

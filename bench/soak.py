@@ -82,7 +82,7 @@ def run(cfg: Config) -> list[Row]:
             if not replies.wait(5):
                 raise RuntimeError(f"{method}: no reply")
 
-        service("payload_authority_grab", {"payload_index": "1001-0-0"})
+        service("payload_authority_grab", {"payload_index": "20-0-0"})
         same = {"address": f"127.0.0.1:{broker.port}", "client_id": "soak", "username": "", "password": "",
                 "expire_time": 0, "enable_tls": False}  # fmt: skip
         service("drc_mode_enter", {"mqtt_broker": same, "osd_frequency": 10, "hsi_frequency": 1})

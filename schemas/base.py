@@ -10,7 +10,11 @@ Policy (the contract's rules, applied through these bases and types):
 - ``OutboundModel`` (what the gateway sends): unknown keys are an error, so a message never carries a field
   the contract does not define.
 - Numbers are strict: a JSON string ``"5"``, a boolean or ``5.5`` for an int is rejected, never coerced;
-  floats accept JSON integers (``100`` for ``100.0``) and reject NaN and infinities. Booleans are strict
+  floats accept JSON integers (``100`` for ``100.0``) and reject NaN and infinities. The one tolerance,
+  for what the gateway *receives* (the tolerant reader, ``InboundModel``): an integral JSON number
+  (``60.0``) for an integer field is read as that integer, because DJI's Java Cloud SDK declares such
+  fields ``Float`` and serialises ``60.0``; ``60.5`` is still refused. JSON Schema's ``integer`` already
+  matches ``60.0``, and each such model says which fields in ``x-tolerant-reader``. Booleans are strict
   (``0``/``1`` are not booleans). Integer enums accept their integer values only (not ``"1"``, ``true`` or
   ``1.0``). A wrong type in a speed or a height must never move a device.
 - Optional fields that are absent serialise as absent, never as ``null``.
@@ -20,10 +24,13 @@ Policy (the contract's rules, applied through these bases and types):
 from __future__ import annotations
 
 import enum
+import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Annotated, Any, TypeVar
+from types import UnionType
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar, Union, get_args, get_origin
 
 from pydantic import (
+    AliasChoices,
     AllowInfNan,
     BaseModel,
     BeforeValidator,
@@ -36,7 +43,9 @@ from pydantic import (
     StringConstraints,
     WrapSerializer,
     model_serializer,
+    model_validator,
 )
+from pydantic.fields import FieldInfo
 
 #: Prefix that marks every field and method this project adds to the Cloud API (extension methods are
 #: ``x_<family>_<name>``, extension properties ``x_<name>``). DJI never uses it, so an extension cannot
@@ -59,10 +68,75 @@ class ContractModel(BaseModel):
         return dumped
 
 
-class InboundModel(ContractModel):
-    """A message (or part of one) the gateway receives from the cloud: unknown keys are ignored."""
+def _integer_fields(cls: type[BaseModel]) -> tuple[str, ...]:
+    """The fields of ``cls`` whose type is a plain integer (``int`` or ``int | None``; not bool, not an
+    enum: enums take their integer values only), by their JSON names."""
+    cached = _INTEGER_FIELDS.get(cls)
+    if cached is None:
+        names: list[str] = []
+        for name, info in cls.model_fields.items():
+            types = get_args(info.annotation) if get_origin(info.annotation) in (Union, UnionType) else ()
+            plain = [_bare(t) for t in (types or (info.annotation,)) if t is not type(None)]
+            if len(plain) == 1 and plain[0] is int:
+                names += _json_names(name, info)
+        cached = _INTEGER_FIELDS[cls] = tuple(names)
+    return cached
 
-    model_config = ConfigDict(extra="ignore")
+
+def _bare(annotation: Any) -> Any:
+    """``Annotated[int, ...]`` → ``int``."""
+    return get_args(annotation)[0] if get_origin(annotation) is Annotated else annotation
+
+
+def _json_names(name: str, info: FieldInfo) -> list[str]:
+    """Every key a field is read from: its name, alias, or each of its validation alias choices."""
+    alias = info.validation_alias
+    if isinstance(alias, AliasChoices):
+        return [choice for choice in alias.choices if isinstance(choice, str)]
+    if isinstance(alias, str):
+        return [alias]
+    return [info.alias or name]
+
+
+_INTEGER_FIELDS: dict[type[BaseModel], tuple[str, ...]] = {}
+
+#: What the tolerant reader says in the JSON Schema of a model with integer fields.
+TOLERANT_READER_NOTE = (
+    "An integral JSON number (60.0) is accepted for these integer fields and read as the integer (DJI's "
+    "Java Cloud SDK serialises them as floats); a fraction (60.5) is refused."
+)
+
+
+def read_integral_floats(cls: type[BaseModel], value: Any) -> Any:
+    """The tolerant reader's step for one model: ``60.0`` → ``60`` for its integer fields, before strict
+    validation. Anything else (``60.5``, ``"60"``, ``true``) is left for validation to refuse."""
+    if not isinstance(value, dict):
+        return value
+    fields = _integer_fields(cls)
+    changed = {
+        name: int(v)
+        for name in fields
+        if type(v := value.get(name)) is float and math.isfinite(v) and v.is_integer()
+    }
+    return {**value, **changed} if changed else value
+
+
+def _document_tolerance(schema: dict[str, Any], cls: type[BaseModel]) -> None:
+    fields = _integer_fields(cls)
+    if fields:
+        schema["x-tolerant-reader"] = {"integral_float_fields": list(fields), "note": TOLERANT_READER_NOTE}
+
+
+class InboundModel(ContractModel):
+    """A message (or part of one) the gateway receives from the cloud: unknown keys are ignored, and an
+    integral float for an integer field is read as the integer (the tolerant reader, module docstring)."""
+
+    model_config = ConfigDict(extra="ignore", json_schema_extra=_document_tolerance)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _tolerant_reader(cls, value: Any) -> Any:
+        return read_integral_floats(cls, value)
 
 
 class OutboundModel(ContractModel):

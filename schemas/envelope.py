@@ -102,10 +102,19 @@ def _data_or_empty(value: Any) -> Any:
     return value
 
 
+#: The tolerant reader's note on ``data`` in every request envelope's JSON Schema.
+EMPTY_DATA_NOTE = {
+    "empty_data": (
+        'data may be {}, null, "" or absent: each means no parameters (DJI\'s Java Cloud SDK sends "data": '
+        '"" for every method without any); a method that needs parameters then names the missing field.'
+    )
+}
+
+
 class InboundThingMessage(Envelope):
     """A thing-topic message from the cloud (tid/bid required; unknown keys ignored)."""
 
-    model_config = ConfigDict(extra="ignore")
+    model_config = ConfigDict(extra="ignore", json_schema_extra={"x-tolerant-reader": EMPTY_DATA_NOTE})
 
     tid: Identifier
     bid: Identifier
@@ -211,7 +220,7 @@ class StateMessage(TelemetryMessage):
 class DrcDownMessage(Envelope):
     """A DRC message from the cloud: ``method``, ``data``, maybe ``seq``/``timestamp`` beside ``data``."""
 
-    model_config = ConfigDict(extra="ignore")
+    model_config = ConfigDict(extra="ignore", json_schema_extra={"x-tolerant-reader": EMPTY_DATA_NOTE})
     kind = TopicKind.DRC_DOWN
 
     method: MethodName

@@ -1188,5 +1188,111 @@ WAYLINE_EXAMPLES: tuple[GatewayExample, ...] = (
             },
         },
         "The cloud's answer: a fresh URL and the stored MD5.",
+
+
+
+@dataclass(frozen=True, slots=True)
+class CloudShape:
+    """A request shape a real cloud sends that differs from seed 003's examples, with its source named:
+    what arrives on the wire (``text``, verbatim JSON) and what the contract reads from it (``reads``: the
+    request's ``data`` as the model dumps it). The contract tests validate every one."""
+
+    kind: TopicKind
+    method: str
+    text: str
+    reads: dict[str, Any]
+    source: str
+
+
+_JAVA_SDK = "DJI-Cloud-API-Demo cloud-sdk (Java Cloud SDK)"
+_JAVA_ENV = (
+    '"tid": "0a3c4f9e-5b0d-4a41-9c8e-2d7f1b6e3a10", "bid": "7b1e9d2c-3f4a-4e5b-8c6d-9e0f1a2b3c4d", '
+    '"timestamp": 1700000000000'
+)
+
+#: Every request shape a real cloud sends beyond the seed's examples (issue #17). "data": "" is what the Java
+#: SDK's Jackson mapper writes for a method without parameters; Float fields come out as 60.0.
+CLOUD_SHAPES: tuple[CloudShape, ...] = (
+    *(
+        CloudShape(
+            TopicKind.SERVICES,
+            method,
+            f'{{{_JAVA_ENV}, "method": "{method}", "data": ""}}',
+            {},
+            f"{_JAVA_SDK}: services without parameters are published with an empty-string data",
+        )
+        for method in ("flight_authority_grab", "fly_to_point_stop", "drc_mode_exit")
+    ),
+    CloudShape(
+        TopicKind.SERVICES,
+        "flight_authority_grab",
+        f'{{{_JAVA_ENV}, "method": "flight_authority_grab", "data": null}}',
+        {},
+        "paho clouds that serialise an absent body as null",
+    ),
+    CloudShape(
+        TopicKind.SERVICES,
+        "takeoff_to_point",
+        "{"
+        + _JAVA_ENV
+        + ', "method": "takeoff_to_point", "data": {"flight_id": "6a1b2c3d-4e5f-4a7b-8c9d-0e1f2a3b4c5d", '
+        '"target_latitude": 22.5436, "target_longitude": 113.958, "target_height": 90.0, '
+        '"security_takeoff_height": 30.0, "rth_altitude": 60.0, "rc_lost_action": 2, '
+        '"exit_wayline_when_rc_lost": 1, "max_speed": 10, "rth_mode": 1, "commander_mode_lost_action": 1, '
+        '"commander_flight_mode": 1, "commander_flight_height": 60.0, '
+        '"simulate_mission": {"is_enable": 0, "latitude": 22.5436, "longitude": 113.958}}}',
+        {
+            "flight_id": "6a1b2c3d-4e5f-4a7b-8c9d-0e1f2a3b4c5d",
+            "target_latitude": 22.5436,
+            "target_longitude": 113.958,
+            "target_height": 90.0,
+            "security_takeoff_height": 30.0,
+            "rth_altitude": 60,
+            "rc_lost_action": 2,
+            "exit_wayline_when_rc_lost": 1,
+            "max_speed": 10,
+            "rth_mode": 1,
+            "commander_mode_lost_action": 1,
+            "commander_flight_mode": 1,
+            "commander_flight_height": 60.0,
+            "simulate_mission": {"is_enable": 0, "latitude": 22.5436, "longitude": 113.958},
+        },
+        f"{_JAVA_SDK} TakeoffToPointRequest: Float rthAltitude written as 60.0, and the Cloud API 1.x fields",
+    ),
+    CloudShape(
+        TopicKind.SERVICES,
+        "fly_to_point",
+        "{"
+        + _JAVA_ENV
+        + ', "method": "fly_to_point", "data": {"fly_to_id": "3f2e1d0c-9b8a-4765-8432-10fedcba9876", '
+        '"max_speed": 12.0, "points": [{"latitude": 22.5440, "longitude": 113.9585, "height": 2500.0}]}}',
+        {
+            "fly_to_id": "3f2e1d0c-9b8a-4765-8432-10fedcba9876",
+            "max_speed": 12,
+            "points": [{"latitude": 22.544, "longitude": 113.9585, "height": 2500.0}],
+        },
+        f"{_JAVA_SDK} FlyToPointRequest/Point: heights up to 10000 m, one point (the M30 series flies one)",
+    ),
+    CloudShape(
+        TopicKind.SERVICES,
+        "drc_mode_enter",
+        "{"
+        + _JAVA_ENV
+        + ', "method": "drc_mode_enter", "data": {"mqtt_broker": {"address": "mqtt.example.com:8883", '
+        '"client_id": "drc-4J4R101", "username": "drc", "password": "jwt", "expire_time": 1700003600, '
+        '"enable_tls": true}, "osd_frequency": 10.0, "hsi_frequency": 1.0}}',
+        {
+            "mqtt_broker": {
+                "address": "mqtt.example.com:8883",
+                "client_id": "drc-4J4R101",
+                "username": "drc",
+                "password": "jwt",
+                "expire_time": 1700003600,
+                "enable_tls": True,
+            },
+            "osd_frequency": 10,
+            "hsi_frequency": 1,
+        },
+        f"{_JAVA_SDK} DrcModeEnterRequest/DrcModeMqttBroker: expire_time 1234567890..9999999999",
     ),
 )

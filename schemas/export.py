@@ -35,7 +35,7 @@ from pydantic_core import core_schema
 
 from . import __doc__ as package_doc
 from .envelope import PropertySetMessage, PropertySetReplyMessage
-from .examples import GATEWAY_EXAMPLES, SEED_003, WAYLINE_EXAMPLES
+from .examples import CLOUD_SHAPES, GATEWAY_EXAMPLES, SEED_003, WAYLINE_EXAMPLES
 from .registry import TELEMETRY, Profile, Registry, default_registry
 from .results import GROUND_STATION_ACK_BASE, ResultCode
 from .topics import TOPICS, Direction, TopicKind, template
@@ -141,6 +141,18 @@ def _examples(message: ExportedMessage, registry: Registry) -> list[dict[str, An
             parsed = registry.validate(example.kind, raw)
         payload = json.loads(parsed.model_dump_json(context={"reveal_secrets": True}))
         found.append({"name": "seed_003", "summary": example.section, "payload": payload})
+    for shape in CLOUD_SHAPES:
+        if shape.kind is message.kind and shape.method == message.name:
+            # a real cloud's shape (source named) as it arrives, and what the tolerant reader reads from it
+            parsed = registry.validate(shape.kind, shape.text)
+            found.append(
+                {
+                    "name": "cloud",
+                    "summary": f"As sent by {shape.source}; read as the payload shown.",
+                    "x-as-sent": json.loads(shape.text),
+                    "payload": json.loads(parsed.model_dump_json(context={"reveal_secrets": True})),
+                }
+            )
     for extra in (*GATEWAY_EXAMPLES, *WAYLINE_EXAMPLES):
         if extra.kind is message.kind and extra.name == message.name:
             profile = extra.name if extra.kind in (TopicKind.OSD, TopicKind.STATE) else None

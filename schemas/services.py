@@ -25,7 +25,6 @@ from .base import (
     Longitude,
     PayloadIndex,
     Secret,
-    Text,
     enum_description,
 )
 from .envelope import EmptyRequest
@@ -42,6 +41,26 @@ class RcLostAction(enum.IntEnum):
 class ExitWaylineWhenRcLost(enum.IntEnum):
     CONTINUE = 0
     EXIT = 1
+
+
+class RthMode(enum.IntEnum):
+    OPTIMAL_HEIGHT = 0
+    PRESET_HEIGHT = 1
+
+
+class CommanderModeLostAction(enum.IntEnum):
+    CONTINUE = 0
+    EXECUTE_RC_LOST_ACTION = 1
+
+
+class CommanderFlightMode(enum.IntEnum):
+    SMART_HEIGHT = 0
+    FIXED_HEIGHT = 1
+
+
+class SimulateSwitch(enum.IntEnum):
+    OFF = 0
+    ON = 1
 
 
 class CameraMode(enum.IntEnum):
@@ -77,6 +96,27 @@ _EXIT_WAYLINE = enum_description(
         ExitWaylineWhenRcLost.EXIT: "Exit the wayline task and do the RC-lost action",
     },
 )
+_RTH_MODE = enum_description(
+    RthMode,
+    {
+        RthMode.OPTIMAL_HEIGHT: "Optimal (smart) return-to-home height",
+        RthMode.PRESET_HEIGHT: "Preset return-to-home height (rth_altitude)",
+    },
+)
+_COMMANDER_LOST = enum_description(
+    CommanderModeLostAction,
+    {
+        CommanderModeLostAction.CONTINUE: "Continue the flight to the target",
+        CommanderModeLostAction.EXECUTE_RC_LOST_ACTION: "Execute the RC-lost action",
+    },
+)
+_COMMANDER_MODE = enum_description(
+    CommanderFlightMode,
+    {
+        CommanderFlightMode.SMART_HEIGHT: "Smart height (the aircraft picks its flight height)",
+        CommanderFlightMode.FIXED_HEIGHT: "Fixed height: fly to the target at commander_flight_height",
+    },
+)
 _CAMERA_MODE = enum_description(
     CameraMode, {CameraMode.PHOTO: "Photo taking", CameraMode.RECORDING: "Recording"}
 )
@@ -93,6 +133,19 @@ _RESET_MODE = enum_description(
 # ---------------------------------------------------------------------------------------- shared fields
 
 CameraTypeField = Annotated[CameraType, Field(description="zoom, wide or ir (infrared).")]
+
+#: A task id (``flight_id``, ``fly_to_id``) as DJI's Java Cloud SDK validates it (TakeoffToPointRequest,
+#: FlyToPointRequest: ``^[^<>:"/|?*._\\]+$``): none of ``. _ < > : " / \ | ? *``, at least one character.
+TaskId = Annotated[
+    str,
+    StringConstraints(strict=True, min_length=1, max_length=256, pattern=r'^[^<>:"/|?*._\\]+$'),
+]
+#: A WGS84 target height (m) as the Java Cloud SDK bounds it (Point.height, targetHeight): 2..10000. What an
+#: aircraft can reach is its own limit: an adapter refuses a height above it (325001).
+TargetHeight = Annotated[
+    float,
+    Field(strict=True, allow_inf_nan=False, ge=2, le=10000, json_schema_extra={"x-unit": "m"}),
+]
 
 
 class PayloadRequest(InboundModel):
@@ -136,7 +189,10 @@ class MqttBroker(InboundModel):
     username: Annotated[str, StringConstraints(strict=True, max_length=1024)]
     password: Secret
     expire_time: Int = Field(
-        ge=0, description="Unix time (s) when the credentials expire.", json_schema_extra={"x-unit": "s"}
+        ge=1234567890,
+        le=9999999999,
+        description="Unix time (s) the credentials expire; 1234567890..9999999999 as DJI's Java Cloud SDK.",
+        json_schema_extra={"x-unit": "s"},
     )
     enable_tls: Bool
 
@@ -164,23 +220,30 @@ class DrcModeExit(EmptyRequest):
     """Leave live flight control (seed 003 § Exit the live flight controls mode). No parameters."""
 
 
+class SimulateMission(InboundModel):
+    """DJI's simulated flight (Java Cloud SDK ``SimulateMission``): fly in the simulator at lat/lon."""
+
+    is_enable: int_enum(SimulateSwitch) = Field(description="0: off, 1: on")
+    latitude: Latitude
+    longitude: Longitude
+
+
 class TakeoffToPoint(InboundModel):
     """One-key take-off to a target point (seed 003 § One-key taking off).
 
     ``rc_lost_action`` and ``exit_wayline_when_rc_lost`` are in the table but not in the seed's example, so
-    they are optional (absent: the device keeps its configured behaviour). The other fields are required.
+    they are optional (absent: the device keeps its configured behaviour). The other seed fields are
+    required. Ranges and the ``flight_id`` pattern are DJI's Java Cloud SDK's (TakeoffToPointRequest), which
+    also sends ``rth_mode``, ``commander_mode_lost_action``, ``commander_flight_mode``,
+    ``commander_flight_height`` and ``simulate_mission`` (Cloud API 1.x): accepted here, optional; what a
+    device does with each (or refuses) is its adapter's business and is documented per family.
     """
 
     target_latitude: Latitude
     target_longitude: Longitude
-    target_height: Float = Field(
-        ge=2,
-        le=1500,
-        description="WGS84 altitude of the target (m). Hover on arrival.",
-        json_schema_extra={"x-unit": "m"},
-    )
+    target_height: TargetHeight = Field(description="WGS84 altitude of the target (m). Hover on arrival.")
     security_takeoff_height: Float = Field(
-        ge=2,
+        ge=20,
         le=1500,
         description="Climb to this height above the take-off point first (m).",
         json_schema_extra={"x-unit": "m"},
@@ -195,43 +258,56 @@ class TakeoffToPoint(InboundModel):
     exit_wayline_when_rc_lost: IntEnumField[ExitWaylineWhenRcLost] | None = Field(
         default=None, description=_EXIT_WAYLINE
     )
-    flight_id: Text = Field(min_length=1, description="Task UUID of this take-off.")
+    flight_id: TaskId = Field(description='Task UUID of this take-off (no . _ < > : " / \\ | ? *).')
     max_speed: Int = Field(
         ge=1, le=15, description="Maximum speed (m/s).", json_schema_extra={"x-unit": "m/s"}
     )
+    rth_mode: int_enum(RthMode) | None = Field(default=None, description=_RTH_MODE)
+    commander_mode_lost_action: int_enum(CommanderModeLostAction) | None = Field(
+        default=None, description=_COMMANDER_LOST
+    )
+    commander_flight_mode: int_enum(CommanderFlightMode) | None = Field(
+        default=None, description=_COMMANDER_MODE
+    )
+    commander_flight_height: Float | None = Field(
+        default=None,
+        ge=2,
+        le=3000,
+        description="Flight height above the take-off point in fixed-height commander mode (m).",
+        json_schema_extra={"x-unit": "m"},
+    )
+    simulate_mission: SimulateMission | None = Field(default=None, description="DJI's simulated flight.")
 
 
 class FlyToPointTarget(InboundModel):
     """One fly-to target: WGS84 degrees and altitude (m).
 
-    Heights here and in take-off: 2..1500 m; the seed's step 0.1 is display precision and is not enforced
-    (binary floats are not multiples of 0.1).
+    Heights here and in take-off: 2..10000 m as DJI's Java Cloud SDK validates them (Point.height; the
+    aircraft's own limit is checked by its adapter); the seed's step 0.1 is display precision and is not
+    enforced (binary floats are not multiples of 0.1).
     """
 
     latitude: Latitude
     longitude: Longitude
-    height: Float = Field(ge=2, le=1500, description="WGS84 altitude (m).", json_schema_extra={"x-unit": "m"})
-
-
-#: How many fly-to points are accepted (see ``FlyToPoint``).
-MAX_FLY_TO_POINTS = 16
+    height: TargetHeight = Field(description="WGS84 altitude (m).")
 
 
 class FlyToPoint(InboundModel):
     """Fly to a target point (seed 003 § flyto target point).
 
     Seed contradiction: the table says "Only one target point is supported" but the example sends two
-    (identical) points. Decision: accept 1..16 points; the device flies them in order and the last one is the
-    target. DJI docks honour exactly one, and a cloud that copied the seed's example sends two; rejecting it
-    would fail such clouds for no safety gain (every point is range-checked). An adapter that can fly only one
-    point answers 325001 for more than one. ``max_speed`` min is 0 here (1 for take-off), as in the seed.
+    (identical) points. Decision, as DJI's Java Cloud SDK (FlyToPointRequest: ``@Size(min = 1)``, "the M30
+    series only support one point"): at least one point, no maximum in the contract; the device flies them
+    in order and the last one is the target, and a device refuses more than it can fly (325001, the Onboard
+    SDK aircraft above 254). ``max_speed`` 1..15 and the ``fly_to_id`` pattern are the Java SDK's (the seed's
+    minimum 0 cannot fly).
     """
 
-    fly_to_id: Text = Field(min_length=1, description="Target point (task) id.")
+    fly_to_id: TaskId = Field(description='Target point (task) id (no . _ < > : " / \\ | ? *).')
     max_speed: Int = Field(
-        ge=0, le=15, description="Maximum speed (m/s).", json_schema_extra={"x-unit": "m/s"}
+        ge=1, le=15, description="Maximum speed (m/s).", json_schema_extra={"x-unit": "m/s"}
     )
-    points: list[FlyToPointTarget] = Field(min_length=1, max_length=MAX_FLY_TO_POINTS)
+    points: list[FlyToPointTarget] = Field(min_length=1)
 
 
 class FlyToPointStop(EmptyRequest):

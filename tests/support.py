@@ -335,7 +335,7 @@ class FakeAdapter(Adapter):
         *,
         osd: Mapping[str, Any] | None = None,
     ) -> None:
-        self.info = DeviceInfo(sn=sn, domain="1", type=1001, sub_type=0, payload_index=payload_index)
+        self.info = DeviceInfo(sn=sn, domain="1", type=20, sub_type=0, payload_index=payload_index)
         self.handlers = dict(handlers)
         self._osd = osd
 

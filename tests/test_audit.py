@@ -16,7 +16,7 @@ from gateway.local_broker import LocalBroker
 from gateway.logcontext import JsonFormatter, TextFormatter, register_secret
 from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
 
-GW, SN, PI = "GW-AUDIT-1", "RSDK-AUDIT-1", "1001-0-0"
+GW, SN, PI = "GW-AUDIT-1", "RSDK-AUDIT-1", "20-0-0"
 
 
 def _lines(caplog: pytest.LogCaptureFixture) -> list[dict[str, object]]:

@@ -23,7 +23,7 @@ from tests.support import GatewayThread, gateway_settings, wait_until
 pytestmark = [pytest.mark.broker, pytest.mark.nats]
 
 GW = "GW-CLUSTER-1"
-PI = "1001-0-0"
+PI = "20-0-0"
 
 
 @pytest.fixture(scope="module")

@@ -25,16 +25,16 @@ from tests.support import CloudClient, GatewayThread, gateway_settings, wait_unt
 
 GW = "GW-CON-1"
 SN = "RSDK-CON-1"
-PI = "1001-0-0"
+PI = "20-0-0"
 
 
 # ------------------------------------------------------------------------------------------ pure parts
 def test_field_values_are_json_when_they_parse_and_dots_nest() -> None:
-    assert parse_fields(["x=0.9", "locked=false", "camera_type=wide", "payload_index=1001-0-0"]) == {
+    assert parse_fields(["x=0.9", "locked=false", "camera_type=wide", "payload_index=20-0-0"]) == {
         "x": 0.9,
         "locked": False,
         "camera_type": "wide",
-        "payload_index": "1001-0-0",
+        "payload_index": "20-0-0",
     }
     assert parse_fields(
         ["mqtt_broker.address=127.0.0.1:1883", "mqtt_broker.enable_tls=false", 'sn="123"']

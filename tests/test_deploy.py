@@ -321,8 +321,8 @@ def test_the_compose_topology_runs_as_plain_processes(
         cloud.wait_for(f"{sn}/osd", timeout=10)
 
     # the gimbal moves, through the SLCAN simulator in its own process
-    assert cloud.service("payload_authority_grab", {"payload_index": "1001-0-0"})["data"]["result"] == 0
-    aim = {"payload_index": "1001-0-0", "camera_type": "wide", "locked": False, "x": 0.9, "y": 0.5}
+    assert cloud.service("payload_authority_grab", {"payload_index": "20-0-0"})["data"]["result"] == 0
+    aim = {"payload_index": "20-0-0", "camera_type": "wide", "locked": False, "x": 0.9, "y": 0.5}
     assert cloud.service("camera_aim", aim)["data"]["result"] == 0
     cloud.wait_for("RS-0001/osd", lambda b: abs(b["data"].get("gimbal_yaw", 0) - 28.0) < 0.5, timeout=5)
     # the aircraft takes authority over its serial link; the console works with the broker's users

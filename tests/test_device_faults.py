@@ -27,7 +27,7 @@ pytestmark = pytest.mark.broker
 
 GW = "GW-FAULTS-1"
 SN = "RSDK-F-1"
-PI = "1001-0-0"
+PI = "20-0-0"
 TIMEOUT = 325004
 
 

@@ -26,7 +26,7 @@ from tests.support import BusSniffer, CloudClient, GatewayThread, gateway_settin
 pytestmark = pytest.mark.broker
 
 GW = "GW-TEST-1"
-PI = "1001-0-0"
+PI = "20-0-0"
 DRC_USER, DRC_PASSWORD = "drc-operator", "s3cret-drc-token-9f2c"
 
 
@@ -340,7 +340,7 @@ def test_drc_on_the_main_broker_reuses_its_connection(broker: LocalBroker, can_c
         cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1)
         cloud.service("payload_authority_grab", {"payload_index": PI})
         same = {"address": f"127.0.0.1:{broker.port}", "client_id": "x", "username": "", "password": "",
-                "expire_time": 0, "enable_tls": False}  # fmt: skip
+                "expire_time": 4102444800, "enable_tls": False}  # fmt: skip
         r = cloud.service("drc_mode_enter", {"mqtt_broker": same, "osd_frequency": 5, "hsi_frequency": 1})
         assert r["data"]["result"] == 0
         assert gw.app.drc.dedicated_link is None  # the main connection carries drc/down and drc/up

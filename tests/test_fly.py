@@ -122,7 +122,7 @@ def _metres(a: dict[str, Any], b: dict[str, Any]) -> float:
 
 @pytest.fixture(scope="module")
 def airborne(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
-    """``dji-gateway run --simulate`` on its own mosquitto, its aircraft hovering 5 m up after a take-off
+    """``dji-gateway run --simulate`` on its own mosquitto, its aircraft hovering 20 m up after a take-off
     (one flight for the module's tests: each flies it again from where the last one left it)."""
     broker = LocalBroker().start()
     config = tmp_path_factory.mktemp("fly") / "gateway.toml"
@@ -143,7 +143,7 @@ def airborne(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any
         home = cloud.wait_for(f"{AIRCRAFT}/osd")[-1]["data"]
         takeoff = {
             "target_latitude": home["latitude"] + 0.0001, "target_longitude": home["longitude"],
-            "target_height": home["height"] + 5, "security_takeoff_height": 5, "rth_altitude": 30,
+            "target_height": home["height"] + 20, "security_takeoff_height": 20, "rth_altitude": 30,
             "max_speed": 5, "flight_id": "fly-test",
         }  # fmt: skip
         assert cloud.service("takeoff_to_point", takeoff)["data"]["result"] == 0

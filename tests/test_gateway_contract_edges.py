@@ -56,10 +56,10 @@ def test_gimbal_on_legacy_firmware_replies(broker: LocalBroker, can_channel: str
     settings = gateway_settings(broker.port, [_gimbal(can_channel)], dispatcher={"require_authority": False})
     with GatewayThread(settings):
         cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1)
-        assert cloud.service("camera_photo_take", {"payload_index": "1001-0-0"})["data"]["result"] == 0
-        r = cloud.service("x_rsdk_stiffness_get", {"payload_index": "1001-0-0"})
+        assert cloud.service("camera_photo_take", {"payload_index": "20-0-0"})["data"]["result"] == 0
+        r = cloud.service("x_rsdk_stiffness_get", {"payload_index": "20-0-0"})
         assert r["data"] == {"result": 0, "output": {"pitch": 50, "roll": 50, "yaw": 50}}
-        assert cloud.service("x_rsdk_version_get", {"payload_index": "1001-0-0"})["data"]["output"]["version"]
+        assert cloud.service("x_rsdk_version_get", {"payload_index": "20-0-0"})["data"]["output"]["version"]
     assert model.photos == 1
     cloud.close()
     sim.stop()
@@ -89,7 +89,7 @@ def test_legacy_angle_replies_in_the_configured_order(
     settings = gateway_settings(broker.port, [gimbal], dispatcher={"require_authority": False})
     with GatewayThread(settings):
         cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1)
-        out = cloud.service("x_rsdk_angle_get", {"payload_index": "1001-0-0"})["data"]["output"]
+        out = cloud.service("x_rsdk_angle_get", {"payload_index": "20-0-0"})["data"]["output"]
         assert (out["kind"], out["yaw"], (out["roll"], out["pitch"])) == ("attitude", 30.0, expected)
     cloud.close()
     sim.stop()
@@ -104,7 +104,7 @@ def test_mqtt_311_and_tcp_nodelay(broker: LocalBroker, can_channel: str) -> None
     )  # fmt: skip
     with GatewayThread(settings) as gw:
         cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1)
-        assert cloud.service("camera_photo_take", {"payload_index": "1001-0-0"})["data"]["result"] == 0
+        assert cloud.service("camera_photo_take", {"payload_index": "20-0-0"})["data"]["result"] == 0
         sock = gw.app.bridge._client.socket()
         assert sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
     cloud.close()

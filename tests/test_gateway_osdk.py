@@ -64,7 +64,7 @@ def _take_off(
         "target_latitude": target[0],
         "target_longitude": target[1],
         "target_height": HOME_ALT + height,
-        "security_takeoff_height": 15.0,
+        "security_takeoff_height": 20.0,
         "rth_altitude": 30,
         "flight_id": "flight-1",
         "max_speed": 12,
@@ -82,7 +82,7 @@ def test_takeoff_fields_the_flight_controller_cannot_honour_are_refused(rig: dic
     assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
     target = _north_east(*HOME, 30.0, 0.0)
     base = {"target_latitude": target[0], "target_longitude": target[1], "target_height": HOME_ALT + 20.0,
-            "security_takeoff_height": 15.0, "rth_altitude": 30, "flight_id": "f",
+            "security_takeoff_height": 20.0, "rth_altitude": 30, "flight_id": "f",
             "max_speed": 12}  # fmt: skip
     for extra, field in (
         ({"rc_lost_action": 1}, "rc_lost_action"),  # land; the FC's failsafe is return_home
@@ -99,6 +99,47 @@ def test_takeoff_fields_the_flight_controller_cannot_honour_are_refused(rig: dic
     reply = cloud.service("takeoff_to_point", {**base, "rc_lost_action": 2, "rth_altitude": 45})["data"]
     assert reply["result"] == 0, reply
     assert fc.inspect(lambda m: (m.actions["flight_task"], m.go_home_altitude_m)) == (1, 45.0)
+
+
+def test_java_sdk_takeoff_fields_are_honoured_or_refused(rig: dict[str, Any]) -> None:
+    """Issue #17: the Cloud API 1.x fields DJI's Java Cloud SDK sends with takeoff_to_point. What the FC can
+    do is done (fixed-height commander mode flies the route at commander_flight_height; the commander
+    RC-loss action drives action_on_rc_lost), the rest is refused with 325001 naming the field."""
+    fc, cloud = rig["fc"], rig["cloud"]
+    assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
+    target = _north_east(*HOME, 40.0, 0.0)
+    base = {"target_latitude": target[0], "target_longitude": target[1], "target_height": HOME_ALT + 25.0,
+            "security_takeoff_height": 20.0, "rth_altitude": 60.0, "flight_id": "java-1",
+            "max_speed": 12.0}  # fmt: skip
+    for extra, field in (
+        ({"rth_mode": 0}, "rth_mode"),
+        ({"commander_flight_mode": 0}, "commander_flight_mode"),
+        ({"commander_flight_mode": 1}, "commander_flight_height"),
+        ({"commander_flight_height": 50.0}, "commander_flight_height"),
+        ({"commander_mode_lost_action": 1, "exit_wayline_when_rc_lost": 0}, "commander_mode_lost_action"),
+        (
+            {"simulate_mission": {"is_enable": 1, "latitude": HOME[0], "longitude": HOME[1]}},
+            "simulate_mission",
+        ),
+    ):
+        reply = cloud.service("takeoff_to_point", {**base, **extra})["data"]
+        assert reply["result"] == 325001 and reply["output"]["reason"].startswith(field), (extra, reply)
+    assert fc.inspect(lambda m: m.actions["flight_task"]) == 0
+    java = {"rth_mode": 1, "commander_mode_lost_action": 1, "commander_flight_mode": 1,
+            "commander_flight_height": 35.0, "simulate_mission": {"is_enable": 0, "latitude": HOME[0],
+                                                                 "longitude": HOME[1]}}  # fmt: skip
+    assert cloud.service("takeoff_to_point", {**base, **java})["data"]["result"] == 0
+    wait_until(
+        lambda: any(e["status"] == "task_finish" for e in _events(cloud, "takeoff_to_point_progress")),
+        40,
+        what="take-off task finished",
+    )
+    # the route: up to 20 m, up to 35 m, across at 35 m, down to the target (25 m above take-off)
+    heights = fc.inspect(lambda m: [round(p["altitude"], 1) for p in m.upload.points if p is not None])
+    assert heights == [20.0, 35.0, 35.0, 25.0], heights
+    assert fc.inspect(lambda m: (m.upload.info["action_on_rc_lost"], m.go_home_altitude_m)) == (0, 60.0)
+    statuses = [(e["status"], e["way_point_index"]) for e in _events(cloud, "takeoff_to_point_progress")]
+    assert statuses[-2:] == [("wayline_ok", 3), ("task_finish", 3)], statuses
 
 
 def test_activation_topology_and_osd(rig: dict[str, Any]) -> None:

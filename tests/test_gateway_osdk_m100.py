@@ -72,7 +72,7 @@ def test_an_m100_takes_off_flies_to_a_point_and_never_goes_home(m100: dict[str, 
         "target_latitude": target[0],
         "target_longitude": target[1],
         "target_height": HOME_ALT + 20.0,
-        "security_takeoff_height": 15.0,
+        "security_takeoff_height": 20.0,
         "rth_altitude": 30,
         "flight_id": "m100-1",
         "max_speed": 12,
@@ -109,7 +109,7 @@ def test_an_m100_refuses_a_go_home_altitude_it_cannot_be_given(m100: dict[str, A
     assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
     target = _north_east(*HOME, 30.0, 0.0)
     data = {"target_latitude": target[0], "target_longitude": target[1], "target_height": HOME_ALT + 20.0,
-            "security_takeoff_height": 15.0, "rth_altitude": 60, "flight_id": "m100-2",
+            "security_takeoff_height": 20.0, "rth_altitude": 60, "flight_id": "m100-2",
             "max_speed": 12}  # fmt: skip
     reply = cloud.service("takeoff_to_point", data)["data"]
     assert reply["result"] == 325001 and "go_home_altitude setting (30 m)" in reply["output"]["reason"]

@@ -30,7 +30,7 @@ pytestmark = pytest.mark.broker
 
 GW = "GW-TEST-1"
 SN = "RM-T-1"
-PI = "1002-0-0"
+PI = "39-0-7"
 FAST = Stages(not_started=0.2, preparation=0.3, self_check=0.3, countdown=0.5, in_game=120.0, settling=1.0)
 
 
@@ -129,7 +129,7 @@ def test_match_telemetry_arrives_as_osd_and_state(broker: LocalBroker, tmp_path:
     try:
         topo = r.cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1)[-1]
         sub = topo["data"]["sub_devices"][0]
-        assert (sub["sn"], sub["domain"], sub["type"]) == (SN, "2", 1001)
+        assert (sub["sn"], sub["domain"], sub["type"]) == (SN, "2", 56)
         # state on change: the robot id, then the match's stages up to "in game"
         r.cloud.wait_for(f"{SN}/state", lambda b: b["data"].get("x_robot_id") == 3)
         r.cloud.wait_for(f"{SN}/state", lambda b: b["data"].get("x_game_progress") == 4)
@@ -364,7 +364,7 @@ def test_live_control_drives_the_robot(broker: LocalBroker, tmp_path: Path) -> N
         r.in_topology(True)
         _ok(r.cloud.service("flight_authority_grab", {}))  # the robot's motion, as an aircraft's flight
         same = {"address": f"127.0.0.1:{broker.port}", "client_id": "drc-rm", "username": "",
-                "password": "", "expire_time": 0, "enable_tls": False}  # fmt: skip
+                "password": "", "expire_time": 4102444800, "enable_tls": False}  # fmt: skip
         _ok(r.cloud.service("drc_mode_enter", {"mqtt_broker": same, "osd_frequency": 10, "hsi_frequency": 1}))
 
         def down(method: str, data: dict[str, Any]) -> None:

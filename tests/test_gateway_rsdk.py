@@ -17,7 +17,7 @@ pytestmark = pytest.mark.broker
 
 GW = "GW-TEST-1"
 SN = "RSDK-T-1"
-PI = "1001-0-0"
+PI = "20-0-0"
 
 
 def _device(channel: str, **extra: Any) -> dict[str, Any]:
@@ -61,7 +61,7 @@ def test_topology_state_and_osd_after_connect(rig: dict[str, Any]) -> None:
     topo = cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1)[0]
     assert topo["method"] == "update_topo" and topo["gateway"] == GW
     sub = topo["data"]["sub_devices"][0]
-    assert (sub["sn"], sub["domain"], sub["type"]) == (SN, "1", 1001)
+    assert (sub["sn"], sub["domain"], sub["type"]) == (SN, "1", 20)
     osd = _osd(cloud, lambda d: "gimbal_pitch" in d)
     assert osd["payload_index"] == PI and osd["cameras"][0]["recording_state"] == 0
     assert osd["x_angle_limits"]["pitch_max"] == 145.0 and osd["x_motor_stiffness"]["yaw"] == 50

@@ -62,7 +62,7 @@ def test_broker_killed_and_restarted(private_broker: LocalBroker, can_channel: s
     with GatewayThread(settings) as gw:
         cloud = CloudClient(private_broker.host, private_broker.port, GW)
         wait_until(lambda: gw.app.devices.by_sn("RSDK-T-2").online, 5, what="gimbal online")
-        assert cloud.service("camera_photo_take", {"payload_index": "1001-0-0"})["data"]["result"] == 0
+        assert cloud.service("camera_photo_take", {"payload_index": "20-0-0"})["data"]["result"] == 0
         cloud.close()
         private_broker.stop(kill=True)
         wait_until(lambda: not gw.app.bridge.connected, 5, what="gateway notices the broker is gone")
@@ -72,7 +72,7 @@ def test_broker_killed_and_restarted(private_broker: LocalBroker, can_channel: s
         cloud.wait_for(
             "status", lambda b: [d["sn"] for d in b["data"]["sub_devices"]] == ["RSDK-T-2"], timeout=10
         )
-        assert cloud.service("camera_photo_take", {"payload_index": "1001-0-0"})["data"]["result"] == 0
+        assert cloud.service("camera_photo_take", {"payload_index": "20-0-0"})["data"]["result"] == 0
         assert sim.model.photos == 2
         assert gw.app.metrics.count("mqtt_connects_total") >= 2
         cloud.close()
@@ -108,7 +108,7 @@ def test_gimbal_simulator_in_another_process_over_slcan_tcp(broker: LocalBroker)
         cloud = CloudClient(broker.host, broker.port, GW)
         with GatewayThread(settings):
             cloud.wait_for("RSDK-SLCAN-1/osd", lambda b: "gimbal_yaw" in b["data"], timeout=10)
-            aim = {"payload_index": "1001-0-0", "camera_type": "wide", "locked": False, "x": 0.5, "y": 0.0}
+            aim = {"payload_index": "20-0-0", "camera_type": "wide", "locked": False, "x": 0.5, "y": 0.0}
             r = cloud.service("camera_aim", aim)
             assert r["data"]["result"] == 0
             # the aim tilts up by half the vertical field of view (45° → 22.5°)
@@ -149,7 +149,7 @@ def test_sigterm_stops_motion_publishes_offline_and_exits_0(broker: LocalBroker,
     proc = _spawn(["run", "--config", _config(tmp_path, broker, endpoint.url, "RSDK-TERM-1")])
     try:
         cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1, timeout=15)
-        drag = {"payload_index": "1001-0-0", "locked": False, "pitch_speed": 10.0, "yaw_speed": 10.0}
+        drag = {"payload_index": "20-0-0", "locked": False, "pitch_speed": 10.0, "yaw_speed": 10.0}
         assert cloud.service("camera_screen_drag", drag)["data"]["result"] == 0
         assert gimbal.model.pitch.speed == 10.0
         cloud.clear()
@@ -232,15 +232,13 @@ def test_a_can_adapter_that_disappears_and_comes_back(broker: LocalBroker) -> No
             sim.wait(5)
             sim.wait(5)
             cloud.wait_for("status", lambda b: b["data"]["sub_devices"] == [], timeout=10)
-            assert (
-                cloud.service("camera_photo_take", {"payload_index": "1001-0-0"})["data"]["result"] == 325012
-            )
+            assert cloud.service("camera_photo_take", {"payload_index": "20-0-0"})["data"]["result"] == 325012
             sim.stdout.close()
             sim = _spawn(["simulate", "rsdk", "--tcp", str(port)])
             assert sim.stdout is not None
             sim.stdout.readline()
             wait_until(lambda: gw.app.devices.by_sn("RSDK-GONE-1").online, 15, what="gimbal back")
-            assert cloud.service("camera_photo_take", {"payload_index": "1001-0-0"})["data"]["result"] == 0
+            assert cloud.service("camera_photo_take", {"payload_index": "20-0-0"})["data"]["result"] == 0
     finally:
         cloud.close()
         sim.terminate()

@@ -36,7 +36,7 @@ from tests.support import CloudClient, GatewayThread, gateway_settings, wait_unt
 pytestmark = pytest.mark.broker
 
 GW = "GW-OBS-1"
-PI = "1001-0-0"
+PI = "20-0-0"
 SEED_000_SAMPLE = bytes.fromhex("AA1A000300000000 2211A2420E00200030004000 01147B4097BE".replace(" ", ""))
 
 

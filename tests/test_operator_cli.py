@@ -45,10 +45,10 @@ def test_decode_and_encode_take_their_options_anywhere(capsys: pytest.CaptureFix
 # ------------------------------------------------------------------------------------------ the contract
 def test_check_request_types_values_by_the_contract_and_names_every_problem() -> None:
     ok = check_request(
-        "camera_aim", ["payload_index=1001-0-0", "camera_type=wide", "locked=false", "x=0.9", "y=0.5"]
+        "camera_aim", ["payload_index=20-0-0", "camera_type=wide", "locked=false", "x=0.9", "y=0.5"]
     )
     assert ok.ok and ok.data == {
-        "payload_index": "1001-0-0",
+        "payload_index": "20-0-0",
         "camera_type": "wide",
         "locked": False,
         "x": 0.9,
@@ -60,7 +60,7 @@ def test_check_request_types_values_by_the_contract_and_names_every_problem() ->
     assert bad.problems and bad.problems[0].startswith("data.payload_index: String should match pattern")
     # the reason in full, with the field's path
     out = check_request(
-        "camera_aim", ["payload_index=1001-0-0", "camera_type=wide", "locked=false", "x=3", "y=0.5"]
+        "camera_aim", ["payload_index=20-0-0", "camera_type=wide", "locked=false", "x=3", "y=0.5"]
     )
     assert out.problems == ("data.x: Input should be less than or equal to 1",)
     unknown = check_request("drc_mode_enter", ["mqtt_broker.adress=h:1"])
@@ -119,10 +119,10 @@ def test_send_refuses_a_bad_request_without_publishing_it(
     rec = Recorder(broker, [f"thing/product/{gw}/#"])
     try:
         common = ["--gateway-sn", gw, "--broker", broker.url, "--timeout", "0.5"]
-        assert main(["send", "camera_aimm", "payload_index=1001-0-0", *common]) == 2
+        assert main(["send", "camera_aimm", "payload_index=20-0-0", *common]) == 2
         err = capsys.readouterr().err
         assert "unknown method camera_aimm" in err and "did you mean camera_aim?" in err
-        aim = ["payload_index=1001-0-0", "camera_type=wide", "locked=false", "x=0.9", "y=0.5"]
+        aim = ["payload_index=20-0-0", "camera_type=wide", "locked=false", "x=0.9", "y=0.5"]
         assert main(["send", "camera_aim", *aim, "foo=1", *common]) == 2
         assert "unknown field foo" in capsys.readouterr().err
         assert main(["send", "camera_aim", *aim[:-2], "x=3", "y=0.5", *common]) == 2

@@ -138,7 +138,7 @@ def test_requests_across_broker_kills_are_answered_and_acted_on_once(can_channel
 
     def send(tid: str) -> None:
         body = {"tid": tid, "bid": "b", "timestamp": 0, "method": "camera_photo_take",
-                "data": {"payload_index": "1001-0-0"}}  # fmt: skip
+                "data": {"payload_index": "20-0-0"}}  # fmt: skip
         cloud.client.publish(f"thing/product/{GW}/services", json.dumps(body), qos=1)
 
     def answered() -> set[str]:
@@ -224,10 +224,10 @@ def test_broker_kills_with_services_and_drc_in_flight(can_channel: str) -> None:
         }
 
     main_broker = {"address": f"127.0.0.1:{broker.port}", "client_id": "x", "username": "", "password": "",
-                   "expire_time": 0, "enable_tls": False}  # fmt: skip
+                   "expire_time": 4102444800, "enable_tls": False}  # fmt: skip
     try:
         wait_until(lambda: gw.app.devices.by_sn("RSDK-OUT-2").online, 10, what="gimbal online")
-        assert call("grab", "payload_authority_grab", {"payload_index": "1001-0-0"})["data"]["result"] == 0
+        assert call("grab", "payload_authority_grab", {"payload_index": "20-0-0"})["data"]["result"] == 0
         time.sleep(1.2)  # the broker's autosave (1 s) has both sessions on disk before the first crash
         sticks = DrcSticks(cloud.client, GW, yaw_rate=20.0)
         baseline: tuple[set[str], int] | None = None
@@ -241,7 +241,7 @@ def test_broker_kills_with_services_and_drc_in_flight(can_channel: str) -> None:
             for i in range(5):
                 tid = f"photo-{cycle}-{i}"
                 photo_tids.append(tid)
-                request(tid, "camera_photo_take", {"payload_index": "1001-0-0"})
+                request(tid, "camera_photo_take", {"payload_index": "20-0-0"})
                 time.sleep(0.02)
             broker.stop(kill=True)  # a crash with sticks, heartbeats and requests in flight
             wait_until(lambda: sim.model.yaw.speed == 0.0, 3, what="motion stopped when the broker died")
@@ -256,7 +256,7 @@ def test_broker_kills_with_services_and_drc_in_flight(can_channel: str) -> None:
         answered = lambda: {r["tid"] for r in cloud.find("services_reply")}  # noqa: E731
         while not answered() >= set(photo_tids) and time.monotonic() < deadline:
             for tid in sorted(set(photo_tids) - answered()):
-                request(tid, "camera_photo_take", {"payload_index": "1001-0-0"})
+                request(tid, "camera_photo_take", {"payload_index": "20-0-0"})
             time.sleep(3.0)
         assert answered() >= set(photo_tids), f"unanswered: {sorted(set(photo_tids) - answered())}"
         for tid in photo_tids:

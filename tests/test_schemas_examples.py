@@ -11,8 +11,8 @@ from pydantic import ValidationError
 
 from schemas import Profile, ResultCode, TopicKind, default_registry
 from schemas.drc import DroneControl, HeartBeat, HsiInfoPush
-from schemas.examples import GATEWAY_EXAMPLES, SEED_003, SeedExample
-from schemas.services import MAX_FLY_TO_POINTS, CameraFocalLengthSet, DrcModeEnter, FlyToPoint, TakeoffToPoint
+from schemas.examples import CLOUD_SHAPES, GATEWAY_EXAMPLES, SEED_003, CloudShape, SeedExample
+from schemas.services import CameraFocalLengthSet, DrcModeEnter, FlyToPoint, TakeoffToPoint
 
 REGISTRY = default_registry()
 
@@ -61,6 +61,70 @@ def test_gateway_examples_validate_and_round_trip() -> None:
         assert json.loads(message.model_dump_json()) == example.payload
 
 
+@pytest.mark.parametrize("shape", CLOUD_SHAPES, ids=lambda s: f"{s.method}:{s.source[:30]}")
+def test_every_real_cloud_shape_is_read(shape: CloudShape) -> None:
+    """Issue #17: what real clouds send (schemas.examples.CLOUD_SHAPES, each with its source) is read, as the
+    tolerant reader documents: "data": "" or null is no parameters, 60.0 for an integer field is 60."""
+    message = REGISTRY.validate(shape.kind, shape.text.encode())
+    assert message.method == shape.method and shape.source
+    assert json.loads(message.data.model_dump_json(context={"reveal_secrets": True})) == shape.reads
+
+
+def test_the_tolerant_reader_takes_integral_floats_only() -> None:
+    data = _seed(TopicKind.SERVICES, "takeoff_to_point")["data"]
+    read = TakeoffToPoint.model_validate({**data, "rth_altitude": 60.0, "max_speed": 10.0})
+    assert (read.rth_altitude, read.max_speed) == (60, 10) and type(read.rth_altitude) is int
+    for field, value in (("rth_altitude", 60.5), ("max_speed", 10.25), ("rc_lost_action", 1.0)):
+        with pytest.raises(ValidationError):  # a fraction, or an enum (enums take their integers only)
+            TakeoffToPoint.model_validate({**data, field: value})
+    schema = TakeoffToPoint.model_json_schema()
+    assert schema["x-tolerant-reader"]["integral_float_fields"] == ["rth_altitude", "max_speed"]
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "ok"),
+    [
+        ("target_height", 10000, True),
+        ("target_height", 10000.5, False),
+        ("target_height", 1.9, False),
+        ("security_takeoff_height", 20, True),
+        ("security_takeoff_height", 19.9, False),
+        ("security_takeoff_height", 1500.1, False),
+        ("max_speed", 0, False),
+        ("max_speed", 16, False),
+        ("rth_altitude", 1500, True),
+        ("rth_altitude", 1501, False),
+        ("flight_id", "a-b-c", True),
+        *(("flight_id", f"a{c}b", False) for c in '._<>:"/\\|?*'),
+        ("commander_flight_height", 3000, True),
+        ("commander_flight_height", 3001, False),
+        ("rth_mode", 2, False),
+        ("commander_flight_mode", 2, False),
+        ("simulate_mission", {"is_enable": 2, "latitude": 1.0, "longitude": 1.0}, False),
+    ],
+)
+def test_takeoff_ranges_are_the_java_sdks(field: str, value: Any, ok: bool) -> None:
+    """DJI's Java Cloud SDK TakeoffToPointRequest: target 2..10000, security 20..1500, rth 2..1500, speed
+    1..15, flight_id without . _ < > : " / \\ | ? *, commander height 2..3000."""
+    data = _seed(TopicKind.SERVICES, "takeoff_to_point")["data"]
+    if ok:
+        TakeoffToPoint.model_validate({**data, field: value})
+    else:
+        with pytest.raises(ValidationError):
+            TakeoffToPoint.model_validate({**data, field: value})
+
+
+def test_drc_credentials_expiry_is_the_java_sdks_range() -> None:
+    data = _seed(TopicKind.SERVICES, "drc_mode_enter")["data"]
+    for expire, ok in ((1234567890, True), (9999999999, True), (0, False), (10**10, False)):
+        value = {**data, "mqtt_broker": {**data["mqtt_broker"], "expire_time": expire}}
+        if ok:
+            DrcModeEnter.model_validate(value)
+        else:
+            with pytest.raises(ValidationError):
+                DrcModeEnter.model_validate(value)
+
+
 def _seed(kind: TopicKind, method: str) -> dict[str, Any]:
     (example,) = [e for e in SEED_003 if e.kind is kind and e.method == method]
     return {**json.loads(example.text), **example.patch}
@@ -70,19 +134,19 @@ def _seed(kind: TopicKind, method: str) -> dict[str, Any]:
 
 
 def test_fly_to_point_seed_sends_two_points_and_both_are_kept_in_order() -> None:
-    # Decision (services.FlyToPoint): 1..16 points, flown in order; the seed's example has two.
+    # Decision (services.FlyToPoint): at least one point, flown in order; the seed's example has two.
     raw = _seed(TopicKind.SERVICES, "fly_to_point")
     raw["data"]["points"][1]["height"] = 200
     message = REGISTRY.validate(TopicKind.SERVICES, raw)
     assert [point.height for point in message.data.points] == [100, 200]
 
 
-@pytest.mark.parametrize("count", [0, MAX_FLY_TO_POINTS + 1])
-def test_fly_to_point_point_count_limits(count: int) -> None:
+def test_fly_to_point_point_count_limits() -> None:
+    # DJI's Java Cloud SDK: @Size(min = 1), no maximum (a device refuses more than it can fly)
     point = {"latitude": 1.0, "longitude": 2.0, "height": 50}
     with pytest.raises(ValidationError):
-        FlyToPoint.model_validate({"fly_to_id": "a", "max_speed": 5, "points": [point] * count})
-    FlyToPoint.model_validate({"fly_to_id": "a", "max_speed": 5, "points": [point] * max(1, count - 1)})
+        FlyToPoint.model_validate({"fly_to_id": "a", "max_speed": 5, "points": []})
+    FlyToPoint.model_validate({"fly_to_id": "a", "max_speed": 5, "points": [point] * 300})
 
 
 # ----------------------------------------------------------------------------- hsi_info_push: names
@@ -177,7 +241,7 @@ def test_inbound_ignores_unknown_fields_outbound_rejects_them() -> None:
     ("field", "value"),
     [
         ("max_speed", "12"),
-        ("max_speed", 12.0),
+        ("max_speed", 12.5),
         ("max_speed", True),
         ("target_height", "100"),
         ("target_height", float("nan")),
@@ -215,7 +279,7 @@ def test_drc_password_is_masked_unless_revealed() -> None:
     assert enter.mqtt_broker.password.get_secret_value() == "jwt_token"
 
 
-@pytest.mark.parametrize("frequency", [0, 31, 10.0, "10"])
+@pytest.mark.parametrize("frequency", [0, 31, 10.5, "10"])
 def test_drc_frequencies_are_1_to_30_hz(frequency: Any) -> None:
     data = _seed(TopicKind.SERVICES, "drc_mode_enter")["data"]
     with pytest.raises(ValidationError):

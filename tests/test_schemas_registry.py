@@ -237,7 +237,7 @@ def test_aircraft_osd_payload_keys() -> None:
 def test_bad_parameters_give_325001_with_a_short_reason() -> None:
     registry = default_registry()
     raw = _seed(TopicKind.SERVICES, "fly_to_point")
-    raw["data"]["points"][0]["height"] = 1600
+    raw["data"]["points"][0]["height"] = 10001
     payload = json.dumps(raw).encode()
     with pytest.raises(ValidationError) as caught:
         registry.validate(TopicKind.SERVICES, payload)
@@ -249,7 +249,7 @@ def test_bad_parameters_give_325001_with_a_short_reason() -> None:
     assert dumped["data"]["result"] == 325001
     assert (
         dumped["data"]["output"]["reason"]
-        == "data.points.0.height: Input should be less than or equal to 1500"
+        == "data.points.0.height: Input should be less than or equal to 10000"
     )
 
 

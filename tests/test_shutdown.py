@@ -68,7 +68,7 @@ def test_sigterm_mid_mission_stops_every_device(broker: LocalBroker, tmp_path: P
     try:
         cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 3, timeout=20)
         # the gimbal drags, the robot drives, the aircraft flies a mission
-        assert cloud.service("payload_authority_grab", {"payload_index": "1001-0-0"})["data"]["result"] == 0
+        assert cloud.service("payload_authority_grab", {"payload_index": "20-0-0"})["data"]["result"] == 0
         drive = {"sn": "RM-STOP-1", "vx": 1.0, "vy": 0.0, "wz": 0.0, "duration": 10.0}
         assert cloud.service("x_robomaster_chassis_velocity", drive)["data"]["result"] == 0
         assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
@@ -80,7 +80,7 @@ def test_sigterm_mid_mission_stops_every_device(broker: LocalBroker, tmp_path: P
         wait_until(
             lambda: fc.inspect(lambda m: m.task == "waypoint" and m.speed > 3.0), 30, what="mission flying"
         )
-        drag = {"payload_index": "1001-0-0", "locked": False, "pitch_speed": 0.0, "yaw_speed": 20.0}
+        drag = {"payload_index": "20-0-0", "locked": False, "pitch_speed": 0.0, "yaw_speed": 20.0}
         assert cloud.service("camera_screen_drag", drag)["data"]["result"] == 0  # a drag lasts 0.5 s
         assert gimbal.model.yaw.speed == 20.0 and robot.board.vx == 1.0
         cloud.clear()

@@ -82,7 +82,7 @@ def start_gateway(broker: LocalBroker, can_channel: str, **console: Any) -> Gate
             {
                 "type": "rsdk",
                 "sn": SN,
-                "payload_index": "1001-0-0",
+                "payload_index": "20-0-0",
                 "interface": "virtual",
                 "channel": can_channel,
             }
@@ -117,7 +117,7 @@ def test_actions_need_the_token_and_every_refusal_is_audited(
 ) -> None:
     caplog.set_level(logging.INFO, logger=AUDIT_LOGGER)
     port = rig["port"]
-    grab = {"method": "payload_authority_grab", "data": {"payload_index": "1001-0-0"}}
+    grab = {"method": "payload_authority_grab", "data": {"payload_index": "20-0-0"}}
     own = f"http://127.0.0.1:{port}"
     # no token at all, a wrong one, a right one from another site
     assert request(port, "POST", "/api/action", grab)[0] == 401
@@ -162,8 +162,8 @@ def test_actions_need_the_token_and_every_refusal_is_audited(
     assert status == 200 and body["result"] == 0
     (done,) = [r for r in audit_records(caplog) if r["event"] == "console_action" and r["result"] == 0]
     assert done["who"].startswith("session:") and done["who"].endswith("@127.0.0.1")
-    assert done["method"] == "payload_authority_grab" and done["data"] == {"payload_index": "1001-0-0"}
-    assert rig["gw"].app.devices.authority.payloads == {"1001-0-0"}
+    assert done["method"] == "payload_authority_grab" and done["data"] == {"payload_index": "20-0-0"}
+    assert rig["gw"].app.devices.authority.payloads == {"20-0-0"}
     # signed out: the cookie is worth nothing
     request(port, "DELETE", "/api/session", None, good)
     assert request(port, "POST", "/api/action", grab, good)[0] == 401
@@ -181,12 +181,12 @@ def test_moving_a_device_needs_a_confirmation_and_the_gateway_validates_again(
             port,
             "POST",
             "/api/action",
-            {"method": "payload_authority_grab", "data": {"payload_index": "1001-0-0"}},
+            {"method": "payload_authority_grab", "data": {"payload_index": "20-0-0"}},
             auth,
         )[1]["result"]
         == 0
     )
-    aim = {"payload_index": "1001-0-0", "camera_type": "wide", "locked": False, "x": 0.9, "y": 0.5}
+    aim = {"payload_index": "20-0-0", "camera_type": "wide", "locked": False, "x": 0.9, "y": 0.5}
     status, body, _ = request(port, "POST", "/api/action", {"method": "camera_aim", "data": aim}, auth)
     assert status == 428 and "confirm" in body["error"]
     assert gw.app.devices.by_sn(SN).osd_snapshot()["gimbal_yaw"] == pytest.approx(0.0, abs=0.5)
@@ -288,7 +288,7 @@ def test_frames_download_as_candump_that_decode_reads_back(rig: dict[str, Any]) 
         port,
         "POST",
         "/api/action",
-        {"method": "x_rsdk_version_get", "data": {"payload_index": "1001-0-0"}},
+        {"method": "x_rsdk_version_get", "data": {"payload_index": "20-0-0"}},
         bearer(port),
     )
     status, text, headers = request(port, "GET", f"/api/frames/{SN}?format=candump")
@@ -318,7 +318,7 @@ def test_the_console_refuses_a_foreign_host_and_serves_no_secret(rig: dict[str, 
     assert {"payload_authority_grab", "camera_aim", "gimbal_reset", "x_rsdk_position_set"} <= set(methods)
     aim = methods["camera_aim"]["schema"]
     assert aim["properties"]["x"]["maximum"] == 1 and "payload_index" in aim["required"]
-    assert device["prefill"]["payload_index"] == "1001-0-0"
+    assert device["prefill"]["payload_index"] == "20-0-0"
     # the static files come from the package; the page's modules are plain ES modules
     status, js, _ = request(port, "GET", "/static/js/app.js")
     assert status == 200 and "import" in js
@@ -334,7 +334,7 @@ def test_read_only_and_tokenless_consoles(private_broker: LocalBroker, can_chann
         gw = start_gateway(private_broker, can_channel, token=TOKEN, read_only=True)
         try:
             port = gw.app.observability.port
-            grab = {"method": "payload_authority_grab", "data": {"payload_index": "1001-0-0"}}
+            grab = {"method": "payload_authority_grab", "data": {"payload_index": "20-0-0"}}
             status, body, _ = request(port, "POST", "/api/action", grab, bearer(port))
             assert status == 403 and "read-only" in body["error"]
             status, body, _ = request(port, "POST", "/api/estop", {}, bearer(port))  # a stop only stops

@@ -86,6 +86,7 @@ AUTO_TAKEOFF = 11  # display mode while the FC's own take-off runs: missions are
 PROGRESS_INTERVAL = 0.5
 EARTH_RADIUS = 6_378_137.0  # m (WGS84 equatorial): the local flat-earth distances of progress events
 MAX_MISSION_POINTS = 255  # the mission init's u8 length (seed 004 0x03 0x10)
+MIN_WAYPOINT_SPACING = 0.5  # m between neighbouring waypoints (the FC refuses closer ones: 0xE5)
 #: takeoff_to_point's rc_lost_action (Cloud API enum) as the ``rc_lost_action`` setting names it
 _RC_LOST_ACTIONS = {0: "hover", 1: "land", 2: "return_home"}
 
@@ -140,6 +141,13 @@ def _leg(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
     at most a few km: the error is far below a metre)."""
     north = math.radians(b[0] - a[0]) * EARTH_RADIUS
     east = math.radians(b[1] - a[1]) * EARTH_RADIUS * math.cos(math.radians((a[0] + b[0]) / 2))
+    return math.sqrt(north * north + east * east + (b[2] - a[2]) ** 2)
+
+
+def _distance_3d(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
+    """Metres between two (lat°, lon°, height m) points, flat earth (waypoints are close together)."""
+    north = math.radians(b[0] - a[0]) * EARTH_RADIUS_M
+    east = math.radians(b[1] - a[1]) * EARTH_RADIUS_M * math.cos(math.radians(a[0]))
     return math.sqrt(north * north + east * east + (b[2] - a[2]) ** 2)
 
 
@@ -796,6 +804,64 @@ class AircraftAdapter(SupervisedAdapter):
             )
         self._check_height("security_takeoff_height", float(data.security_takeoff_height))
         self._check_height("target_height", self._relative(data.target_height))
+        # DJI's Java Cloud SDK (Cloud API 1.x) fields: what this FC can do is honoured, the rest refused
+        if getattr(data, "rth_mode", None) == 0:
+            raise InvalidParameters(
+                "rth_mode: an Onboard SDK flight controller returns home at its preset altitude "
+                "(rth_mode 1, rth_altitude); optimal-height return is not available"
+            )
+        self._exit_on_rc_lost(data)  # the two spellings must agree
+        mode = getattr(data, "commander_flight_mode", None)
+        height = getattr(data, "commander_flight_height", None)
+        if mode == 0:
+            raise InvalidParameters(
+                "commander_flight_mode: smart height is not available on an Onboard SDK flight controller; "
+                "use 1 (fixed height) with commander_flight_height"
+            )
+        if mode == 1 and height is None:
+            raise InvalidParameters("commander_flight_height: required with commander_flight_mode 1")
+        if mode is None and height is not None:
+            raise InvalidParameters("commander_flight_height: applies with commander_flight_mode 1 only")
+        if height is not None:
+            self._check_height("commander_flight_height", float(height))
+        simulate = getattr(data, "simulate_mission", None)
+        if simulate is not None and simulate.is_enable == 1:
+            raise InvalidParameters(
+                "simulate_mission: an Onboard SDK flight controller's simulator is started from DJI "
+                "Assistant 2, not by a command (dji-gateway run --simulate simulates the whole aircraft)"
+            )
+
+    @staticmethod
+    def _exit_on_rc_lost(data: Any) -> bool:
+        """Exit the mission when the RC is lost? ``commander_mode_lost_action`` (Cloud API 1.x) or the
+        older ``exit_wayline_when_rc_lost`` it replaces: 1 exit, 0 or absent continue; both given and
+        different is refused."""
+        old = getattr(data, "exit_wayline_when_rc_lost", None)
+        new = getattr(data, "commander_mode_lost_action", None)
+        if old is not None and new is not None and int(old) != int(new):
+            raise InvalidParameters(
+                "commander_mode_lost_action: disagrees with exit_wayline_when_rc_lost (the same setting)"
+            )
+        return (new if new is not None else old) == 1
+
+    def _takeoff_route(self, data: Any) -> list[tuple[float, float, float]]:
+        """The mission after the take-off (lat/lon degrees, height above take-off): straight up to
+        ``security_takeoff_height``; in fixed-height commander mode up (or down) to
+        ``commander_flight_height``, across at that height and down (or up) to the target; else straight
+        to the target. Points closer than 0.5 m to the previous one are left out (the FC refuses them)."""
+        t = self.telemetry
+        here = (t.latitude or 0.0, t.longitude or 0.0)
+        target = (data.target_latitude, data.target_longitude)
+        route = [(*here, float(data.security_takeoff_height))]
+        cruise = getattr(data, "commander_flight_height", None)
+        if getattr(data, "commander_flight_mode", None) == 1 and cruise is not None:
+            route += [(*here, float(cruise)), (*target, float(cruise))]
+        route.append((*target, self._relative(data.target_height)))
+        kept = route[:1]
+        for point in route[1:]:
+            if _distance_3d(kept[-1], point) >= MIN_WAYPOINT_SPACING:
+                kept.append(point)
+        return kept
 
     async def _set_go_home_altitude(self, altitude: int) -> None:
         """0x01 0x42 GO_HOME_ALTITUDE (new firmware): written, and the FC's echo must hold it."""
@@ -834,15 +900,11 @@ class AircraftAdapter(SupervisedAdapter):
                 return
             await asyncio.sleep(0.1)
         try:
-            climb = float(data.security_takeoff_height)
-            points = [
-                (t.latitude or 0.0, t.longitude or 0.0, climb),
-                (data.target_latitude, data.target_longitude, self._relative(data.target_height)),
-            ]
-            # takeoff_to_point's exit_wayline_when_rc_lost: 1 exit → init action_on_rc_lost 0; 0 or absent →
-            # 1 continue (the seed's default)
-            exit_on_rc_lost = getattr(data, "exit_wayline_when_rc_lost", None) == 1
-            await self._upload(points, data.max_speed, exit_on_rc_lost=exit_on_rc_lost)
+            points = self._takeoff_route(data)
+            task.points = len(points)
+            # exit_wayline_when_rc_lost / commander_mode_lost_action: 1 exit → init action_on_rc_lost 0;
+            # 0 or absent → 1 continue (the seed's default)
+            await self._upload(points, data.max_speed, exit_on_rc_lost=self._exit_on_rc_lost(data))
             await self._gs("wp_start_stop", {"start": 0})
         except DeviceRejected as exc:
             self._progress(task, "wayline_failed", 0, exc.result)

@@ -22,7 +22,10 @@ class OsdkDeviceSettings(BaseModel):
     model_config = DEVICE_MODEL_CONFIG
     type: Literal["osdk"] = "osdk"
     sn: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
-    product: ProductSettings = ProductSettings(domain="0", type=1001, sub_type=0)
+    product: ProductSettings = Field(
+        ProductSettings(domain="0", type=60, sub_type=0),
+        description="Cloud API identity; default M300 RTK (0-60-0), an Onboard-SDK airframe DJI's enum lists",
+    )
     url: str = Field(description="pyserial URL: /dev/ttyUSB0, /dev/serial/by-id/…, socket://host:port, a pty")
     baudrate: Literal[115200, 230400, 921600, 1000000] = 230400
     serial_options: dict[str, Any] = Field(default_factory=dict, description="extra pyserial arguments")

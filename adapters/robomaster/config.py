@@ -4,10 +4,13 @@ The gateway sits on one UART with the robot's main board (e.g. a Taproot ``DJISe
 which passes the referee system's frames through and obeys the gateway's control messages
 (``adapters.robomaster.commands`` documents that wire contract).
 
-Product fields: the Cloud API has no ground-robot domain. The default ``domain`` is ``"2"`` (the
-ground-side namespace DJI uses for remote controllers) because common cloud SDKs refuse any domain
-outside 0-3 while parsing ``update_topo``; a cloud that knows robots can configure other digits.
-``"0"`` and ``"1"`` are refused: the gateway would publish aircraft or gimbal bodies for them.
+Product fields: the Cloud API has no ground-robot domain or type. The default is ``2-56-0`` (domain 2, the
+ground-side namespace DJI uses for remote controllers; type 56 "DJI RC") because DJI's Java Cloud SDK
+resolves every ``update_topo`` entry with ``DeviceEnum.find`` and rejects a combination it does not list
+(the whole topology then fails); a cloud that knows robots can configure its own. ``"0"`` and ``"1"`` are
+refused: the gateway would publish aircraft or gimbal bodies for them. The gimbal's ``payload_index`` is
+``{type}-{sub_type}-{gimbal_index}`` of the payload type the cloud should load (e.g. ``39-0-7``, DJI's FPV
+camera at the FPV position).
 """
 
 from __future__ import annotations
@@ -67,7 +70,10 @@ class RobomasterDeviceSettings(BaseModel):
         pattern=r"^\d{1,5}-\d{1,5}-\d{1,5}$",
         description="expose the robot's gimbal as this payload (camera_screen_drag, gimbal_reset)",
     )
-    product: ProductSettings = ProductSettings(domain="2", type=1001, sub_type=0)
+    product: ProductSettings = Field(
+        ProductSettings(domain="2", type=56, sub_type=0),
+        description="Cloud API identity; no DJI type exists for a robot: default 2-56-0, resolvable (docs)",
+    )
     url: str = Field(
         min_length=1, description="pyserial URL: /dev/ttyUSB0, /dev/serial/by-id/…, socket://host:port, a pty"
     )

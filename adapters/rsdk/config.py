@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, model_validator
 
 from adapters.config import DEVICE_MODEL_CONFIG, ProductSettings
 
@@ -17,8 +17,33 @@ class RsdkDeviceSettings(BaseModel):
     model_config = DEVICE_MODEL_CONFIG
     type: Literal["rsdk"] = "rsdk"
     sn: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
-    payload_index: str = Field("1001-0-0", pattern=r"^\d{1,5}-\d{1,5}-\d{1,5}$")
-    product: ProductSettings = ProductSettings(domain="1", type=1001, sub_type=0)
+    product: ProductSettings = Field(
+        ProductSettings(domain="1", type=20, sub_type=0),
+        description="Cloud API identity (domain 1, a payload); default Zenmuse Z30 (1-20-0): no DJI type "
+        "exists for an R SDK gimbal; the Z30 is the gimbal camera in DJI's enum whose methods it serves",
+    )
+    gimbal_index: int = Field(
+        0, ge=0, le=99999, description="the payload position (DJI: 0 front left, 1 front right, 2 top, 7 FPV)"
+    )
+    payload_index: str | None = Field(
+        None,
+        pattern=r"^\d{1,5}-\d{1,5}-\d{1,5}$",
+        description="{type}-{sub_type}-{gimbal_index} of product and gimbal_index (default: derived); "
+        "a value that says otherwise is refused",
+    )
+
+    @model_validator(mode="after")
+    def _payload_index(self) -> RsdkDeviceSettings:
+        derived = f"{self.product.type}-{self.product.sub_type}-{self.gimbal_index}"
+        if self.payload_index is None:
+            object.__setattr__(self, "payload_index", derived)  # frozen model: set once, here
+        elif self.payload_index != derived:
+            raise ValueError(
+                f"payload_index {self.payload_index!r} is not {{type}}-{{sub_type}}-{{gimbal_index}} "
+                f"= {derived!r}"
+            )
+        return self
+
     interface: str = Field("virtual", description="python-can interface: socketcan, slcan, pcan, virtual, …")
     channel: str = Field("djigw", description="can0, /dev/ttyACM0, socket://127.0.0.1:PORT, …")
     bitrate: int = Field(1_000_000, description="R SDK gimbals run at 1 Mbit/s")
