@@ -56,11 +56,10 @@ def _events(cloud: CloudClient, method: str) -> list[dict[str, Any]]:
     return [b["data"] for b in cloud.find("/events", lambda b: b.get("method") == method)]
 
 
-def _take_off(
-    cloud: CloudClient, north: float = 30.0, height: float = 20.0, **extra: Any
-) -> tuple[float, float]:
+def _takeoff_data(north: float = 30.0, height: float = 20.0, **extra: Any) -> dict[str, Any]:
+    """A takeoff_to_point request to ``north`` m north of home, ``height`` m above it."""
     target = _north_east(*HOME, north, 0.0)
-    data = {
+    return {
         "target_latitude": target[0],
         "target_longitude": target[1],
         "target_height": HOME_ALT + height,
@@ -70,8 +69,21 @@ def _take_off(
         "max_speed": 12,
         **extra,
     }
+
+
+def _assert_refused(cloud: CloudClient, base: dict[str, Any], cases: Any) -> None:
+    """Each (extra fields, field) case of takeoff_to_point is answered 325001 with a reason naming field."""
+    for extra, field in cases:
+        reply = cloud.service("takeoff_to_point", {**base, **extra})["data"]
+        assert reply["result"] == 325001 and reply["output"]["reason"].startswith(field), (extra, reply)
+
+
+def _take_off(
+    cloud: CloudClient, north: float = 30.0, height: float = 20.0, **extra: Any
+) -> tuple[float, float]:
+    data = _takeoff_data(north, height, **extra)
     assert cloud.service("takeoff_to_point", data)["data"]["result"] == 0
-    return target
+    return data["target_latitude"], data["target_longitude"]
 
 
 def test_takeoff_fields_the_flight_controller_cannot_honour_are_refused(rig: dict[str, Any]) -> None:
@@ -80,20 +92,15 @@ def test_takeoff_fields_the_flight_controller_cannot_honour_are_refused(rig: dic
     with 325001 naming the field, before anything is sent; a matching request goes through."""
     fc, cloud = rig["fc"], rig["cloud"]
     assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
-    target = _north_east(*HOME, 30.0, 0.0)
-    base = {"target_latitude": target[0], "target_longitude": target[1], "target_height": HOME_ALT + 20.0,
-            "security_takeoff_height": 20.0, "rth_altitude": 30, "flight_id": "f",
-            "max_speed": 12}  # fmt: skip
-    for extra, field in (
+    base = _takeoff_data(flight_id="f")
+    cases = (
         ({"rc_lost_action": 1}, "rc_lost_action"),  # land; the FC's failsafe is return_home
         ({"rc_lost_action": 0}, "rc_lost_action"),
         ({"rth_altitude": 10}, "rth_altitude"),
         ({"rth_altitude": 501}, "rth_altitude"),
         ({"target_height": HOME_ALT + 600.0}, "target_height"),
-    ):
-        reply = cloud.service("takeoff_to_point", {**base, **extra})["data"]
-        assert reply["result"] == 325001, (extra, reply)
-        assert reply["output"]["reason"].startswith(field), reply
+    )
+    _assert_refused(cloud, base, cases)
     assert fc.inspect(lambda m: (m.actions["flight_task"], m.actions["go_home_altitude_write"])) == (0, 0)
     assert fc.inspect(lambda m: m.go_home_altitude_m) == 20.0
     reply = cloud.service("takeoff_to_point", {**base, "rc_lost_action": 2, "rth_altitude": 45})["data"]
@@ -107,11 +114,8 @@ def test_java_sdk_takeoff_fields_are_honoured_or_refused(rig: dict[str, Any]) ->
     RC-loss action drives action_on_rc_lost), the rest is refused with 325001 naming the field."""
     fc, cloud = rig["fc"], rig["cloud"]
     assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
-    target = _north_east(*HOME, 40.0, 0.0)
-    base = {"target_latitude": target[0], "target_longitude": target[1], "target_height": HOME_ALT + 25.0,
-            "security_takeoff_height": 20.0, "rth_altitude": 60.0, "flight_id": "java-1",
-            "max_speed": 12.0}  # fmt: skip
-    for extra, field in (
+    base = _takeoff_data(40.0, 25.0, rth_altitude=60.0, flight_id="java-1", max_speed=12.0)
+    cases = (
         ({"rth_mode": 0}, "rth_mode"),
         ({"commander_flight_mode": 0}, "commander_flight_mode"),
         ({"commander_flight_mode": 1}, "commander_flight_height"),
@@ -121,9 +125,8 @@ def test_java_sdk_takeoff_fields_are_honoured_or_refused(rig: dict[str, Any]) ->
             {"simulate_mission": {"is_enable": 1, "latitude": HOME[0], "longitude": HOME[1]}},
             "simulate_mission",
         ),
-    ):
-        reply = cloud.service("takeoff_to_point", {**base, **extra})["data"]
-        assert reply["result"] == 325001 and reply["output"]["reason"].startswith(field), (extra, reply)
+    )
+    _assert_refused(cloud, base, cases)
     assert fc.inspect(lambda m: m.actions["flight_task"]) == 0
     java = {"rth_mode": 1, "commander_mode_lost_action": 1, "commander_flight_mode": 1,
             "commander_flight_height": 35.0, "simulate_mission": {"is_enable": 0, "latitude": HOME[0],

@@ -18,7 +18,7 @@ from adapters.osdk.sim import OsdkFcDevice, OsdkFcModel
 from adapters.simio import TcpEndpoint
 from gateway.local_broker import LocalBroker
 from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
-from tests.test_gateway_osdk import HOME, HOME_ALT, _distance, _events, _north_east
+from tests.test_gateway_osdk import HOME, HOME_ALT, _distance, _events, _north_east, _takeoff_data
 
 pytestmark = pytest.mark.broker
 
@@ -107,10 +107,7 @@ def test_an_m100_refuses_a_go_home_altitude_it_cannot_be_given(m100: dict[str, A
     """Legacy firmware has no command for the go-home altitude: rth_altitude must be the configured one."""
     fc, cloud = m100["fc"], m100["cloud"]
     assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
-    target = _north_east(*HOME, 30.0, 0.0)
-    data = {"target_latitude": target[0], "target_longitude": target[1], "target_height": HOME_ALT + 20.0,
-            "security_takeoff_height": 20.0, "rth_altitude": 60, "flight_id": "m100-2",
-            "max_speed": 12}  # fmt: skip
+    data = _takeoff_data(rth_altitude=60, flight_id="m100-2")
     reply = cloud.service("takeoff_to_point", data)["data"]
     assert reply["result"] == 325001 and "go_home_altitude setting (30 m)" in reply["output"]["reason"]
     assert fc.inspect(lambda m: m.actions["flight_task"]) == 0

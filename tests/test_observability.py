@@ -302,7 +302,7 @@ interface = "slcan"
 channel = "{endpoint.url}"
 bus_options = {{ sleep_after_open = 0 }}
 drc_drive = true
-product = {{ domain = "1", device_secret = "{DEVICE_SECRET}" }}
+product = {{ domain = "1", type = 20, device_secret = "{DEVICE_SECRET}" }}
 '''
     )
     cloud = CloudClient(broker.host, broker.port, GW, username="cloud", password=CLOUD_PW)
