@@ -141,7 +141,7 @@ def run(cfg: Config) -> list[Row]:
 
         service("payload_authority_grab", {"payload_index": PI})
         same = {"address": f"127.0.0.1:{broker.port}", "client_id": "x", "username": "", "password": "",
-                "expire_time": 0, "enable_tls": False}  # fmt: skip
+                "expire_time": 4102444800, "enable_tls": False}  # fmt: skip
         down = f"thing/product/{GW}/drc/down"
         beating = threading.Event()
 

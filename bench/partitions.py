@@ -165,7 +165,7 @@ class Rig:
     @property
     def main_broker(self) -> dict[str, Any]:
         return {"address": f"{self.gw_host}:{self.gw_port}", "client_id": "cell-drc", "username": "",
-                "password": "", "expire_time": 0, "enable_tls": False}  # fmt: skip
+                "password": "", "expire_time": 4102444800, "enable_tls": False}  # fmt: skip
 
 
 class NetnsGateway(GatewayThread):

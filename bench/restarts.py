@@ -152,7 +152,7 @@ def run(cfg: Config) -> list[Row]:
             raise RuntimeError("flight_authority_grab refused")
         time.sleep(1.2)  # the broker's autosave has the sessions on disk before the first crash
         main = {"address": f"127.0.0.1:{broker.port}", "client_id": "x", "username": "", "password": "",
-                "expire_time": 0, "enable_tls": False}  # fmt: skip
+                "expire_time": 4102444800, "enable_tls": False}  # fmt: skip
         enter = {"mqtt_broker": main, "osd_frequency": 5, "hsi_frequency": 1}
 
         def photos() -> None:

@@ -84,7 +84,7 @@ def run(cfg: Config) -> list[Row]:
 
         service("payload_authority_grab", {"payload_index": "20-0-0"})
         same = {"address": f"127.0.0.1:{broker.port}", "client_id": "soak", "username": "", "password": "",
-                "expire_time": 0, "enable_tls": False}  # fmt: skip
+                "expire_time": 4102444800, "enable_tls": False}  # fmt: skip
         service("drc_mode_enter", {"mqtt_broker": same, "osd_frequency": 10, "hsi_frequency": 1})
         down = f"thing/product/{GW}/drc/down"
         rss0 = _rss_mb()
