@@ -223,7 +223,7 @@ class DrcModeExit(EmptyRequest):
 class SimulateMission(InboundModel):
     """DJI's simulated flight (Java Cloud SDK ``SimulateMission``): fly in the simulator at lat/lon."""
 
-    is_enable: int_enum(SimulateSwitch) = Field(description="0: off, 1: on")
+    is_enable: IntEnumField[SimulateSwitch] = Field(description="0: off, 1: on")
     latitude: Latitude
     longitude: Longitude
 
@@ -262,11 +262,11 @@ class TakeoffToPoint(InboundModel):
     max_speed: Int = Field(
         ge=1, le=15, description="Maximum speed (m/s).", json_schema_extra={"x-unit": "m/s"}
     )
-    rth_mode: int_enum(RthMode) | None = Field(default=None, description=_RTH_MODE)
-    commander_mode_lost_action: int_enum(CommanderModeLostAction) | None = Field(
+    rth_mode: IntEnumField[RthMode] | None = Field(default=None, description=_RTH_MODE)
+    commander_mode_lost_action: IntEnumField[CommanderModeLostAction] | None = Field(
         default=None, description=_COMMANDER_LOST
     )
-    commander_flight_mode: int_enum(CommanderFlightMode) | None = Field(
+    commander_flight_mode: IntEnumField[CommanderFlightMode] | None = Field(
         default=None, description=_COMMANDER_MODE
     )
     commander_flight_height: Float | None = Field(
