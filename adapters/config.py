@@ -6,9 +6,11 @@ collect them in one discriminated union on ``type``.
 
 from __future__ import annotations
 
+from typing import Any
+
 from pydantic import BaseModel, ConfigDict, SecretStr
 
-__all__ = ["DEVICE_MODEL_CONFIG", "ProductSettings"]
+__all__ = ["DEVICE_MODEL_CONFIG", "ProductSettings", "with_family_defaults"]
 
 DEVICE_MODEL_CONFIG = ConfigDict(extra="forbid", frozen=True)
 
@@ -24,3 +26,13 @@ class ProductSettings(BaseModel):
     sub_type: int = 0
     thing_version: str = "1.1.2"
     device_secret: SecretStr | None = None
+
+
+def with_family_defaults(default: ProductSettings, value: Any) -> Any:
+    """A device's ``product`` table completed with its family's defaults: ``{domain = "1", device_secret =
+    …}`` keeps the family's type and sub_type (not the gateway's, which ``ProductSettings()`` would give,
+    silently changing a gimbal's derived ``payload_index``). Use in a ``mode="before"`` validator."""
+    if isinstance(value, dict):
+        base = {k: v for k, v in default.model_dump().items() if v is not None}
+        return {**base, **value}
+    return value

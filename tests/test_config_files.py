@@ -128,3 +128,28 @@ def test_a_stalled_link_is_given_up_before_the_drc_heartbeat_times_out() -> None
     assert s.broker.for_live_control(s.drc.heartbeat_timeout).stall_timeout == pytest.approx(0.667)
     d = load_settings(None, gateway_sn="G")
     assert d.broker.for_live_control(d.drc.heartbeat_timeout).stall_timeout == 2.0  # the default fits
+
+
+def test_device_identity_defaults_and_payload_index() -> None:
+    """Issue #17: identities from DJI's enum (docs/cloud-api.md), a partial product table keeps the family's
+    type, and a gimbal's payload_index is {type}-{sub_type}-{gimbal_index} of its product."""
+    from adapters.osdk.config import OsdkDeviceSettings
+    from adapters.robomaster.config import RobomasterDeviceSettings
+    from adapters.rsdk.config import RsdkDeviceSettings
+    from gateway.settings import GatewaySettings
+
+    gimbal = RsdkDeviceSettings(sn="G1")
+    assert (gimbal.product.domain, gimbal.product.type, gimbal.payload_index) == ("1", 20, "20-0-0")
+    assert RsdkDeviceSettings(sn="G1", gimbal_index=2).payload_index == "20-0-2"
+    partial = RsdkDeviceSettings(sn="G1", product={"domain": "1", "device_secret": "s"})
+    assert (partial.product.type, partial.payload_index) == (20, "20-0-0")
+    with pytest.raises(ValueError, match="is not"):
+        RsdkDeviceSettings(sn="G1", payload_index="1001-0-0")
+    aircraft = OsdkDeviceSettings(sn="A1", url="/dev/null").product
+    robot = RobomasterDeviceSettings(sn="R1", url="/dev/null").product
+    gateway = GatewaySettings(gateway_sn="GW").product
+    assert [(p.domain, p.type, p.sub_type) for p in (aircraft, robot, gateway)] == [
+        ("0", 60, 0),
+        ("2", 56, 0),
+        ("2", 119, 0),
+    ]

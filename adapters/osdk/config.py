@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, field_validator
 
-from adapters.config import DEVICE_MODEL_CONFIG, ProductSettings
+from adapters.config import DEVICE_MODEL_CONFIG, ProductSettings, with_family_defaults
 
 __all__ = ["DEFAULT_FREQUENCIES", "OsdkDeviceSettings"]
 
@@ -16,6 +16,10 @@ __all__ = ["DEFAULT_FREQUENCIES", "OsdkDeviceSettings"]
 DEFAULT_FREQUENCIES = [1, 2, 0, 2, 0, 2, 0, 0, 0, 0, 2, 2, 1, 1, 0, 0]
 
 
+#: The family's Cloud API identity (docs/cloud-api.md "Device identity").
+OSDK_PRODUCT = ProductSettings(domain="0", type=60, sub_type=0)
+
+
 class OsdkDeviceSettings(BaseModel):
     """A DJI flight controller (A3, N3, M600, M210, M100) on the Onboard SDK UART, exposed as an aircraft."""
 
@@ -23,7 +27,7 @@ class OsdkDeviceSettings(BaseModel):
     type: Literal["osdk"] = "osdk"
     sn: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
     product: ProductSettings = Field(
-        ProductSettings(domain="0", type=60, sub_type=0),
+        OSDK_PRODUCT,
         description="Cloud API identity; default M300 RTK (0-60-0), an Onboard-SDK airframe DJI's enum lists",
     )
     url: str = Field(description="pyserial URL: /dev/ttyUSB0, /dev/serial/by-id/…, socket://host:port, a pty")
@@ -79,3 +83,8 @@ class OsdkDeviceSettings(BaseModel):
         le=500,
         description="the flight controller's height limit above take-off (m): higher targets are refused",
     )
+
+    @field_validator("product", mode="before")
+    @classmethod
+    def _family_product(cls, value: Any) -> Any:
+        return with_family_defaults(OSDK_PRODUCT, value)

@@ -15,11 +15,11 @@ camera at the FPV position).
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, Field, field_validator, model_validator
 
-from adapters.config import DEVICE_MODEL_CONFIG, ProductSettings
+from adapters.config import DEVICE_MODEL_CONFIG, ProductSettings, with_family_defaults
 from adapters.robomaster.commands import DEFAULT_CONTROL_CMD_ID, DEFAULT_SEASON, ControlChannel
 from adapters.robomaster.protocol import REFEREE_MAX_DATA_LEN
 
@@ -59,6 +59,10 @@ class ControlSettings(BaseModel):
         return ControlChannel(self.cmd_id, self.data_cmd_id, sender, self.receiver_id)
 
 
+#: The family's Cloud API identity (docs/cloud-api.md "Device identity").
+ROBOMASTER_PRODUCT = ProductSettings(domain="2", type=56, sub_type=0)
+
+
 class RobomasterDeviceSettings(BaseModel):
     """A RoboMaster robot: referee telemetry in, chassis/gimbal control out, on one serial port."""
 
@@ -71,7 +75,7 @@ class RobomasterDeviceSettings(BaseModel):
         description="expose the robot's gimbal as this payload (camera_screen_drag, gimbal_reset)",
     )
     product: ProductSettings = Field(
-        ProductSettings(domain="2", type=56, sub_type=0),
+        ROBOMASTER_PRODUCT,
         description="Cloud API identity; no DJI type exists for a robot: default 2-56-0, resolvable (docs)",
     )
     url: str = Field(
@@ -101,3 +105,8 @@ class RobomasterDeviceSettings(BaseModel):
         if v.domain in ("0", "1"):
             raise ValueError("a robot's domain must not be 0 (aircraft) or 1 (payload)")
         return v
+
+    @field_validator("product", mode="before")
+    @classmethod
+    def _family_product(cls, value: Any) -> Any:
+        return with_family_defaults(ROBOMASTER_PRODUCT, value)

@@ -4,11 +4,15 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, Field, model_validator
+from pydantic import BaseModel, Field, field_validator, model_validator
 
-from adapters.config import DEVICE_MODEL_CONFIG, ProductSettings
+from adapters.config import DEVICE_MODEL_CONFIG, ProductSettings, with_family_defaults
 
 __all__ = ["RsdkDeviceSettings"]
+
+
+#: The family's Cloud API identity (docs/cloud-api.md "Device identity").
+RSDK_PRODUCT = ProductSettings(domain="1", type=20, sub_type=0)
 
 
 class RsdkDeviceSettings(BaseModel):
@@ -18,7 +22,7 @@ class RsdkDeviceSettings(BaseModel):
     type: Literal["rsdk"] = "rsdk"
     sn: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
     product: ProductSettings = Field(
-        ProductSettings(domain="1", type=20, sub_type=0),
+        RSDK_PRODUCT,
         description="Cloud API identity (domain 1, a payload); default Zenmuse Z30 (1-20-0): no DJI type "
         "exists for an R SDK gimbal; the Z30 is the gimbal camera in DJI's enum whose methods it serves",
     )
@@ -75,3 +79,8 @@ class RsdkDeviceSettings(BaseModel):
         False, description="live control (DRC) sticks drive this gimbal: w → yaw, h → pitch"
     )
     drc_pitch_gain: float = Field(10.0, gt=0, le=72, description="DRC: gimbal pitch °/s per m/s of h")
+
+    @field_validator("product", mode="before")
+    @classmethod
+    def _family_product(cls, value: Any) -> Any:
+        return with_family_defaults(RSDK_PRODUCT, value)
