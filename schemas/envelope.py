@@ -103,7 +103,7 @@ def _data_or_empty(value: Any) -> Any:
 
 
 #: The tolerant reader's note on ``data`` in every request envelope's JSON Schema.
-EMPTY_DATA_NOTE = {
+EMPTY_DATA_NOTE: dict[str, JsonValue] = {
     "empty_data": (
         'data may be {}, null, "" or absent: each means no parameters (DJI\'s Java Cloud SDK sends "data": '
         '"" for every method without any); a method that needs parameters then names the missing field.'

@@ -1188,7 +1188,8 @@ WAYLINE_EXAMPLES: tuple[GatewayExample, ...] = (
             },
         },
         "The cloud's answer: a fresh URL and the stored MD5.",
-
+    ),
+)
 
 
 @dataclass(frozen=True, slots=True)

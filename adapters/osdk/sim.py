@@ -1629,7 +1629,9 @@ def in_process(device: Any) -> tuple[InProcessSim, Any] | None:
         return None
     # an M100's go-home altitude is the one its entry states (the simulated FC holds it)
     held = device.go_home_altitude
-    extra = {} if held is None else {"go_home_altitude_m": float(held)}
-    endpoint = TcpEndpoint(OsdkFcDevice(OsdkFcModel(firmware=device.firmware, **extra))).start()
+    model = OsdkFcModel(firmware=device.firmware)
+    if held is not None:
+        model.go_home_altitude_m = float(held)
+    endpoint = TcpEndpoint(OsdkFcDevice(model)).start()
     log.info("simulated aircraft %s at %s", device.sn, endpoint.url)
     return endpoint, device.model_copy(update={"url": endpoint.url})
