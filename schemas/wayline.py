@@ -21,7 +21,7 @@ from pydantic import Field, StringConstraints, model_validator
 from .base import Float, InboundModel, Int, IntEnumField, Latitude, Longitude, OutboundModel, Text
 from .envelope import EmptyRequest
 from .results import ResultValue
-from .services import ExitWaylineWhenRcLost  # the same enum as takeoff_to_point's
+from .services import ExitWaylineWhenRcLost, RthMode  # the same enums as takeoff_to_point's
 
 #: ``flight_id``: the SDK's regex ``^[^<>:"/|?*._\\]+$`` [SDK:FlighttaskPrepareRequest].
 FlightId = Annotated[
@@ -35,11 +35,6 @@ class TaskType(enum.IntEnum):
     IMMEDIATE = 0
     TIMED = 1
     CONDITIONAL = 2
-
-
-class RthMode(enum.IntEnum):
-    OPTIMAL = 0
-    PRESET = 1
 
 
 class OutOfControlAction(enum.IntEnum):
