@@ -22,7 +22,8 @@ Theory of operation. :class:`gateway.mqtt.MqttBridge` owns the sockets and paho;
   of their CONNACK (MQTT 3.1.1 has no reason to give; mosquitto 2.0 closes an MQTT 5 connection that is
   taken over without one too): another client uses the same id. Backoff doubles from :data:`TAKEOVER_FIRST` to
   ``takeover_backoff_max`` (≥ 30 s); the suspicion clears once a connection has lasted
-  :data:`STABLE_AFTER` seconds.
+  :data:`STABLE_AFTER` seconds. A probe round that no node answered ends a streak: the connections
+  before it were closed by an outage (broker or network down), not by a twin, which needs the broker up.
 * **Stalled connection**: the bridge reports a connection whose oldest unacknowledged segment has
   been retransmitted repeatedly (TCP's own view, ``TCP_INFO``). It then probes; when a node answers
   while the old connection is still stuck (TCP would wait out its grown retransmission timer, up to
@@ -110,6 +111,12 @@ class ReconnectPolicy:
     def connected(self, now: float, index: int) -> None:
         """CONNACK accepted on ``index``."""
         self.last_index = index
+
+    def unreachable(self, now: float) -> None:
+        """A probe round found no node (or the chosen one was gone before the CONNECT): the broker or the
+        network is down. The short connections before it were ended by that outage, not by another client
+        with our id (a twin can only take our session over while the broker is up): the streak ends."""
+        self._short_streak = 0
 
     def refused(self, now: float) -> float:
         """The broker answered and refused (CONNACK, TLS, no CONNACK): when to probe again."""

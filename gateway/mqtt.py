@@ -435,6 +435,8 @@ class MqttBridge:
             while not self._stop.is_set():
                 now = self._clock()
                 if now >= next_round:
+                    if rounds:  # the last round found nobody
+                        self.policy.unreachable(now)
                     if rounds == 1 or (rounds and rounds % 600 == 0):
                         self._report_unreachable(prober.errors)
                     prober.launch(now)
@@ -499,6 +501,7 @@ class MqttBridge:
         except OSError as exc:  # the node went away between the probe and the connect
             self.last_error = f"cannot connect: {exc.strerror or exc}"
             self._metrics.inc("mqtt_connect_failures_total", link=self._name)
+            self.policy.unreachable(self._clock())
             return self.policy.next_round(self._clock())
         finally:
             client._thread = None

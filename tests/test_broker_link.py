@@ -102,6 +102,20 @@ def test_without_0x8e_a_takeover_is_a_streak_of_immediate_disconnects() -> None:
     assert r.takeover_suspected
 
 
+def test_short_connections_with_outages_between_them_are_not_a_takeover() -> None:
+    """A broker (or network) that goes down every 2 s closes short connections too; a probe round that
+    no node answered in between says so: a twin needs the broker up to take the session over."""
+    p = policy()
+    for k in range(3 * TAKEOVER_STREAK):
+        p.lost(10.0 * k, lasted=2.0, how=Loss.CLOSED)
+        p.unreachable(10.0 * k + 1)
+    assert not p.takeover_suspected and p.takeover_count == 0
+    # with the broker answering every probe in between, the same short connections are a streak
+    for k in range(TAKEOVER_STREAK):
+        p.lost(100.0 + k, lasted=2.0, how=Loss.CLOSED)
+    assert p.takeover_suspected
+
+
 def test_a_stalled_connection_dropped_because_a_node_answers_reconnects_at_once() -> None:
     p = policy()
     assert p.lost(50.0, lasted=10.0, how=Loss.STALLED) == 50.0
