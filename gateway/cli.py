@@ -40,7 +40,10 @@ def build_parser() -> argparse.ArgumentParser:
         "DIR. Without DIR: schemas/json/ of the source checkout this command runs from (the committed "
         "contract); an installed package is never written into (exit 2: give a DIR).",
     )
-    export.add_argument("directory", nargs="?", default=None, metavar="DIR")
+    export.add_argument(
+        "directory", nargs="?", default=None, metavar="DIR",
+        help="where to write (default: schemas/json/ of the source checkout)",
+    )  # fmt: skip
     export.set_defaults(handler=_schema_export)
     return parser
 

@@ -136,15 +136,17 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
         help="decode frames from hex (arguments or stdin) into JSON lines",
         description="Decode hex (or, for rsdk, candump lines) into one JSON object per frame.",
     )
-    dec.add_argument("protocol", choices=families.names())
+    dec.add_argument("protocol", choices=families.names(), help="the device family: its frame format")
     dec.add_argument("hex", nargs="*", help="hex bytes; '-' or nothing reads stdin")
     _family_options(dec, "decode")
     dec.set_defaults(handler=lambda ns: run_decode(ns, sys.stdin, sys.stdout), trailing=("hex", _is_hex_word))
 
     enc = sub.add_parser("encode", help="encode one command as a frame (hex)")
-    enc.add_argument("protocol", choices=families.names())
+    enc.add_argument("protocol", choices=families.names(), help="the device family: its frame format")
     enc.add_argument("command", help="command name from the protocol's table")
-    enc.add_argument("--seq", type=lambda s: int(s, 0), default=0)
+    enc.add_argument(
+        "--seq", type=lambda s: int(s, 0), default=0, help="the frame's sequence number (decimal or 0x…; 0)"
+    )
     enc.add_argument("--can", action="store_true", help="rsdk: print the CAN split as ID#DATA lines")
     enc.add_argument("fields", nargs="*", help="field=value (JSON values; hex strings for bytes)")
     _family_options(enc, "encode")

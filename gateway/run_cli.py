@@ -78,7 +78,9 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
     run.add_argument("--simulate", action="store_true", help="add in-process simulated devices")
     run.add_argument("--gateway-sn", help="gateway serial number, overrides the config")
     run.add_argument("--log-json", action="store_true", help="one JSON object per log line")
-    run.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    run.add_argument(
+        "--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"), help="overrides the config's log_level"
+    )
     run.add_argument(
         "--metrics-port", type=int, help="/metrics, /healthz, /status port (default 9108; 0: any)"
     )
@@ -87,7 +89,7 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
     run.set_defaults(handler=cmd_run)
 
     sim = sub.add_parser("simulate", help="run one device simulator as its own process")
-    sim.add_argument("device", choices=families.names())
+    sim.add_argument("device", choices=families.names(), help="the device family to simulate")
     sim.add_argument("args", nargs=argparse.REMAINDER, help="simulator options (see: simulate rsdk --help)")
     sim.set_defaults(handler=cmd_simulate)
 

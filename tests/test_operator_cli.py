@@ -257,6 +257,27 @@ def test_every_command_and_option_is_in_the_readme_and_the_other_way_round() -> 
     assert "Exit 0 healthy, 1 unhealthy, 2 when no gateway answers" in status_help
 
 
+def test_every_argument_of_every_command_has_a_help_text() -> None:
+    """`--help` explains every option and positional (README's table is not the only place that does:
+    issue #22 item 12 found `encode --seq` bare)."""
+    import argparse
+
+    from gateway.cli import build_parser
+
+    bare: list[str] = []
+
+    def walk(parser: argparse.ArgumentParser, name: str) -> None:
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub_name, sub in action.choices.items():
+                    walk(sub, f"{name} {sub_name}")
+            elif not action.help and action.help != argparse.SUPPRESS:
+                bare.append(f"{name} {'/'.join(action.option_strings) or action.dest}")
+
+    walk(build_parser(), "dji-gateway")
+    assert not bare, f"arguments without a help text: {bare}"
+
+
 @pytest.mark.broker
 def test_status_in_a_pipe_is_not_cut_to_80_columns(broker: LocalBroker, can_channel: str) -> None:
     from adapters.rsdk.sim import GimbalCanSim
