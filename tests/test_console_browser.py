@@ -425,3 +425,50 @@ def test_the_page_sends_no_secret_and_no_outside_request(chromium: Any, gateway:
         assert bodies and not any(TOKEN in b for b in bodies)
     finally:
         page.close()
+
+
+def test_the_page_validates_a_form_before_sending_it(chromium: Any, gateway: dict[str, Any]) -> None:
+    """Validation in the page (issue #21 item 6): a value out of the contract's range or against its pattern
+    is marked at its field and nothing is sent; the same form with valid values is sent. The gateway's
+    own check is ``test_web_console::…the_gateway_validates_again``."""
+    page = chromium.new_page()
+    posted: list[str] = []
+    page.on(
+        "request", lambda r: posted.append(r.url) if r.method == "POST" and "/api/action" in r.url else None
+    )
+    try:
+        page.goto(gateway["url"] + "/")
+        page.wait_for_selector('#device-table tr[data-sn="RSDK-SIM-0001"][data-online="true"]', timeout=10000)
+        if page.is_hidden("#signedin"):
+            page.fill("#token", TOKEN)
+            page.click("#signin button")
+            page.wait_for_selector("#signedin:not([hidden])", timeout=5000)
+        page.select_option("#action-device", "RSDK-SIM-0001")
+        page.select_option("#action-method", "camera_aim")
+        good = {"payload_index": "1001-0-0", "x": "0.5", "y": "0.5"}
+        bad = {"payload_index": "gimbal one", "x": "1.9"}
+        for name, value in {**good, **bad}.items():
+            page.fill(f'#action-form [name="{name}"]', value)
+        page.select_option('#action-form [name="camera_type"]', label="wide")
+        page.select_option('#action-form [name="locked"]', label="false")
+        page.click("#action-send")
+        page.wait_for_selector("#action-result >> text=not sent", timeout=5000)
+        for name in bad:
+            page.wait_for_selector(f'#action-form [name="{name}"].invalid', timeout=5000)
+            assert page.locator(f'#action-form [data-error-for="{name}"]').count() == 1, name
+        assert "at most 1" in page.inner_text('#action-form [data-error-for="x"]')
+        assert page.locator("#action-form .invalid").count() == len(bad)  # the valid fields are not marked
+        assert not page.evaluate("() => document.querySelector('#confirm').open")  # not even asked
+        time.sleep(0.5)
+        assert posted == [], posted  # nothing left the page
+        for name, value in good.items():  # corrected: sent (after the confirmation: the gimbal moves)
+            page.fill(f'#action-form [name="{name}"]', value)
+        page.evaluate("() => { delete document.querySelector('#action-result').dataset.result; }")
+        page.click("#action-send")
+        page.wait_for_selector("#confirm[open]", timeout=5000)
+        page.click("#confirm-ok")
+        page.wait_for_selector('#action-result[data-method="camera_aim"][data-result]', timeout=15000)
+        assert page.locator("#action-form .invalid").count() == 0
+        assert len(posted) == 1, posted
+    finally:
+        page.close()
