@@ -472,3 +472,37 @@ def test_the_page_validates_a_form_before_sending_it(chromium: Any, gateway: dic
         assert len(posted) == 1, posted
     finally:
         page.close()
+
+
+def test_the_frame_inspector_pauses_filters_by_direction_and_resumes(
+    chromium: Any, gateway: dict[str, Any]
+) -> None:
+    """Issue #21 item 5's pause and filters: paused, the table holds still while the gimbal keeps pushing;
+    rx unticked, only the gateway's own frames remain; resumed, new frames come in again."""
+    page = chromium.new_page()
+    try:
+        page.goto(gateway["url"] + "/")
+        page.wait_for_selector('#device-table tr[data-sn="RSDK-SIM-0001"][data-online="true"]', timeout=10000)
+        page.select_option("#frame-link", "RSDK-SIM-0001")
+        rows = page.locator("#frame-table tbody tr")
+        page.wait_for_selector('#frame-table tbody tr[data-dir="rx"]', timeout=10000)
+
+        def top() -> str:
+            return str(rows.first.inner_text())
+
+        first = top()
+        wait_until(lambda: top() != first, 5, what="frames arriving live")  # the gimbal's pushes
+        page.click("#frame-pause")
+        assert page.inner_text("#frame-pause") == "Resume" and "paused" in page.inner_text("#frame-count")
+        held, held_count = top(), page.inner_text("#frame-count")
+        time.sleep(1.5)  # the gimbal pushes many frames meanwhile
+        assert (top(), page.inner_text("#frame-count")) == (held, held_count)
+        page.uncheck("#frame-dir-rx")  # the direction filter applies to what is kept, paused or not
+        assert page.locator('#frame-table tbody tr[data-dir="rx"]').count() == 0
+        assert "dir=tx" in (page.get_attribute("#frame-download", "href") or "")
+        page.check("#frame-dir-rx")
+        page.click("#frame-pause")
+        assert page.inner_text("#frame-pause") == "Pause"
+        wait_until(lambda: top() != held, 5, what="frames arriving again after Resume")
+    finally:
+        page.close()

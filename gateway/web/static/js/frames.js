@@ -19,6 +19,7 @@ export function configure(config, send) {
   $("#frame-pause").addEventListener("click", () => {
     paused = !paused;
     $("#frame-pause").textContent = paused ? "Resume" : "Pause";
+    count(); // "· paused" shows at once (no frame arrives to redraw it while paused)
     ask({ type: "frames", sn: paused ? null : sn });
   });
   $("#frame-filter").addEventListener("input", draw);
