@@ -506,3 +506,31 @@ def test_the_frame_inspector_pauses_filters_by_direction_and_resumes(
         wait_until(lambda: top() != held, 5, what="frames arriving again after Resume")
     finally:
         page.close()
+
+
+@pytest.mark.parametrize("viewport", [(1400, 1000), (800, 600)], ids=["desktop", "small"])
+def test_the_emergency_stop_stays_in_view_wherever_the_page_is_scrolled(
+    chromium: Any, gateway: dict[str, Any], viewport: tuple[int, int]
+) -> None:
+    """Issue #21 item 6: one always-visible emergency-stop button (``page.click`` would scroll to it, so
+    this looks at where it is drawn)."""
+    page = chromium.new_page()
+    try:
+        page.set_viewport_size({"width": viewport[0], "height": viewport[1]})
+        page.goto(gateway["url"] + "/")
+        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=10000)
+        assert page.evaluate("() => document.documentElement.scrollHeight") > viewport[1]  # it does scroll
+        for where in ("document.body.scrollHeight / 2", "document.body.scrollHeight"):
+            page.evaluate(f"() => window.scrollTo(0, {where})")
+            page.wait_for_function("() => window.scrollY > 0")
+            box = page.locator("#estop").bounding_box()
+            assert box is not None and box["height"] > 10, box
+            assert box["y"] >= 0 and box["y"] + box["height"] <= viewport[1], (where, box)
+            assert box["x"] >= 0 and box["x"] + box["width"] <= viewport[0], (where, box)
+            # nothing covers it: the element at its centre is the button itself
+            assert page.evaluate(
+                "([x, y]) => document.elementFromPoint(x, y)?.closest('#estop') !== null",
+                [box["x"] + box["width"] / 2, box["y"] + box["height"] / 2],
+            )
+    finally:
+        page.close()
