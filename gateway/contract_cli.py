@@ -85,14 +85,15 @@ def _type_name(schema: dict[str, Any], root: dict[str, Any]) -> str:
     return " | ".join(dict.fromkeys(n for n in names if n != "null")) or "any"
 
 
-def _detail(schema: dict[str, Any], root: dict[str, Any]) -> str:
+def _detail(schema: dict[str, Any], root: dict[str, Any], name: str = "x") -> str:
+    """Ranges (written with the field's ``name``: ``0 ≤ y ≤ 1``), lengths, patterns, the default."""
     parts = []
     for v in _variants(schema, root):
         lo, hi = v.get("minimum", v.get("exclusiveMinimum")), v.get("maximum", v.get("exclusiveMaximum"))
         if lo is not None or hi is not None:
             left = "" if lo is None else f"{lo} {'<' if 'exclusiveMinimum' in v else '≤'} "
             right = "" if hi is None else f" {'<' if 'exclusiveMaximum' in v else '≤'} {hi}"
-            parts.append(f"{left}x{right}")
+            parts.append(f"{left}{name}{right}")
         if "maxLength" in v:
             parts.append(f"≤ {v['maxLength']} chars")
         if "pattern" in v:
@@ -124,7 +125,7 @@ def fields_of(spec: MethodSpec) -> list[FieldDoc]:
                 f"{prefix}{name}",
                 _type_name(prop, root),
                 name in required,
-                _detail(prop, root),
+                _detail(prop, root, name),
                 " ".join(str(resolved.get("description", "")).split("\n\n")[0].split()),
             )
             if nested is not None:

@@ -85,6 +85,8 @@ def test_methods_lists_the_registry_and_one_methods_fields(capsys: pytest.Captur
     out = capsys.readouterr().out
     (x_row,) = [ln for ln in out.splitlines() if ln.startswith("  x ")]
     assert x_row.split() == ["x", "number", "required", "0", "≤", "x", "≤", "1"]
+    (y_row,) = [ln for ln in out.splitlines() if ln.startswith("  y ")]
+    assert y_row.split() == ["y", "number", "required", "0", "≤", "y", "≤", "1"]  # the range names its field
     assert main(["methods", "drc_mode_enter"]) == 0
     assert "mqtt_broker.address" in capsys.readouterr().out
     assert main(["methods", "camera_aimm"]) == 2
