@@ -7,8 +7,9 @@ gateway is back, its resident memory, thread count and open file descriptors are
 At the end every unanswered request is re-sent (the reference cloud's rule) until all are answered.
 
 Figures: RSS after the first cycle and after the last, the slope (least squares over the second half of the
-cycles, KB per crash: the first ones fill the 30 s reply cache and the allocator's arenas, which then stay
-flat), threads and fds first → last, requests unanswered at the end (must be 0).
+cycles, KB per crash: the first ones fill the reply cache (`dispatcher.reply_cache_seconds`, 120 s since
+2026-11-26, was 30 s; at most 10,000 entries) and the allocator's arenas, which then stay flat), threads
+and fds first → last, requests unanswered at the end (must be 0).
 """
 
 from __future__ import annotations

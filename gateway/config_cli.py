@@ -49,7 +49,8 @@ NOTES: dict[str, str] = {
     "broker.tls_hostname_check": "check the broker's certificate host name",
     "broker.reconnect_min": "after a loss the next node is tried within this (s, random)",
     "broker.reconnect_max": "longest backoff (s) for a broker that answers and refuses",
-    "dispatcher.reply_cache_seconds": "a repeated `tid` is answered from this cache, not acted on twice",
+    "dispatcher.reply_cache_seconds": "a repeated `tid` is answered from this cache, not acted on twice; "
+    "keep it above the broker's redelivery interval (NATS `mqtt.ack_wait`: 30 s)",
     "dispatcher.event_retries": "events with `need_reply: 1` are re-sent this often until an `events_reply`",
     "dispatcher.event_retry_interval": "seconds between event re-sends",
     "devices[].type": "the device family",

@@ -202,7 +202,10 @@ class DispatcherSettings(BaseModel):
     request_timeout: float = Field(
         1.0, gt=0, le=2.5, description="device deadline; the reply is always < 3 s"
     )
-    reply_cache_seconds: float = Field(30.0, ge=0)
+    # longer than a broker's redelivery of an unacknowledged QoS 1 request (NATS: mqtt.ack_wait, 30 s by
+    # default, again every 30 s): a copy redelivered after a failover is answered from the cache, not run
+    # again (at 30 s the copy arriving 30.008 s later took a second photo: tests/test_dispatcher_limits.py)
+    reply_cache_seconds: float = Field(120.0, ge=0)
     require_authority: bool = Field(
         True, description="camera/gimbal/flight methods need a prior *_authority_grab"
     )

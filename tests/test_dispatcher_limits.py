@@ -108,3 +108,25 @@ def test_the_reply_cache_expires() -> None:
         assert adapter.calls == 2
 
     asyncio.run(scenario())
+
+
+def test_a_request_a_broker_redelivers_after_its_ack_wait_is_not_acted_on_twice() -> None:
+    """A QoS 1 request whose PUBACK was lost (the broker node died, or the connection moved) is delivered
+    again when the broker's ack timer runs out: NATS's ``mqtt.ack_wait`` is 30 s by default, and the
+    reply cache used to be 30 s too, so the copy arriving 30.008 s after the reply was acted on again
+    (seen in ``test_brokers_cluster``: two photos for one tid). With the default settings the cache
+    outlasts a few such redeliveries."""
+
+    async def scenario() -> None:
+        clock = ManualClock()
+        d, adapter, out = _dispatcher(DispatcherSettings(), clock)
+        adapter.release.set()
+        services = topic(TopicKind.SERVICES, GW)
+        await d.handle(services, _request("redelivered", "camera_photo_take"))
+        for _ in range(3):  # NATS re-sends each ack_wait (30 s) until a PUBACK gets through
+            clock.advance(30.01)
+            await d.handle(services, _request("redelivered", "camera_photo_take"))
+        assert adapter.calls == 1, adapter.calls
+        assert len(out.replies) == 4 and all(r == out.replies[0] for r in out.replies)
+
+    asyncio.run(scenario())
