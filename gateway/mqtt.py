@@ -535,6 +535,8 @@ class MqttBridge:
             return self._clock()
         if self._refused or not self._connack.is_set():
             self._wait_done()
+            if not self._refused:  # closed without a CONNACK (NATS while JetStream elects a leader): say so
+                return self._attempt_failed(ep, "the broker closed the connection before its CONNACK")
             return self.policy.refused(self._clock())
         connected_at = self._clock()
         self.policy.connected(connected_at, self.endpoints.index(ep))

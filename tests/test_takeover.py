@@ -5,6 +5,7 @@ pattern of immediate disconnects), against a real mosquitto."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import time
@@ -87,3 +88,51 @@ def test_a_lone_gateway_is_not_taken_for_a_twin_across_broker_restarts(
             wait_until(lambda: gw.app.bridge.subscribed, 10, what="reconnected")
         assert not gw.app.bridge.takeover_suspected
         assert gw.app.metrics.count("mqtt_takeovers_total") == 0
+
+
+def test_a_broker_that_closes_before_its_connack_is_named_in_the_log(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A node that accepts TCP and closes without a CONNACK (NATS does so for seconds while its JetStream
+    elects a leader after a node died) is retried with the refusal backoff and said once at ERROR: the
+    failover test's slow rounds spent ~9.7 s so without a line in the log."""
+    import socket
+    import threading
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(16)
+    port = server.getsockname()[1]
+    accepted: list[float] = []
+    done = threading.Event()
+
+    def closer() -> None:  # read the CONNECT, then hang up
+        server.settimeout(0.2)
+        while not done.is_set():
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                continue
+            accepted.append(time.monotonic())
+            with conn:
+                conn.settimeout(2)
+                with contextlib.suppress(OSError):
+                    conn.recv(1024)
+
+    threading.Thread(target=closer, daemon=True).start()
+    settings = gateway_settings(
+        port, [], broker={"protocol": "3.1.1", "reconnect_min": 0.2, "reconnect_max": 1.0}
+    )
+    gw = GatewayThread(settings)
+    try:
+        with caplog.at_level(logging.ERROR, logger="gateway.mqtt"):
+            gw.start(connected=False)
+            wait_until(lambda: len(accepted) >= 3, 15, what="three attempts")
+        lines = [r.getMessage() for r in caplog.records if "before its CONNACK" in r.getMessage()]
+        assert len(lines) == 1, [r.getMessage() for r in caplog.records]
+        assert f"127.0.0.1:{port}" in lines[0]
+        assert not gw.app.bridge.takeover_suspected  # no CONNACK: not a connection a twin took over
+    finally:
+        gw.stop()
+        done.set()
+        server.close()
