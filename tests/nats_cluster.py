@@ -98,9 +98,15 @@ class NatsCluster:
         log.close()
 
     def start(self, timeout: float = 60.0) -> NatsCluster:
-        for i in range(self.NODES):
-            self.start_node(i)
-        self.wait_ready(range(self.NODES), timeout)
+        """Start the three nodes and wait until each serves MQTT sessions; when one cannot start (a port
+        picked free and taken by another process before the node bound it), none is left running."""
+        try:
+            for i in range(self.NODES):
+                self.start_node(i)
+            self.wait_ready(range(self.NODES), timeout)
+        except BaseException:
+            self.stop()
+            raise
         return self
 
     def wait_ready(self, nodes: range | list[int], timeout: float = 60.0) -> None:

@@ -128,3 +128,14 @@ def test_cloud_scales_with_a_shared_subscription_on_mosquitto(broker: LocalBroke
             c.close()
         requester.close()
         sim.stop()
+
+
+def test_a_cluster_that_cannot_start_leaves_no_node_running() -> None:
+    """Seen on the shared machine: node 0 exited ('address already in use': a port picked free was taken
+    before it bound it) and nodes 1 and 2 were left running after the test (ResourceWarning, and two
+    nats-server processes nobody stopped). Here node 0's configuration is broken on purpose."""
+    cluster = NatsCluster()
+    (cluster.dir / "n0.conf").write_text("listen: 127.0.0.1:not-a-port\n")
+    with pytest.raises(RuntimeError, match="node 0 exited"):
+        cluster.start(timeout=20)
+    assert not any(cluster.running(i) for i in range(cluster.NODES))
