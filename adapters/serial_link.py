@@ -43,7 +43,7 @@ class LinkError(Exception):
 _READ_ERRORS = (serial.SerialException, OSError, TypeError, AttributeError, ValueError)
 
 
-def _selectable_fd(port: serial.SerialBase) -> int | None:
+def _selectable_fd(port: serial.Serial) -> int | None:
     """The port's descriptor, with pyserial's timeout set to 0 so a read takes what is there and returns;
     None for ports that have none (their reads stay in a thread)."""
     try:
@@ -139,7 +139,7 @@ class SerialLink:
         self.opens += 1
         log.info("serial link open: %s @ %d", self.url, self.baudrate)
 
-    def _make_port(self) -> serial.SerialBase:
+    def _make_port(self) -> serial.Serial:
         kwargs: dict[str, Any] = {
             "baudrate": self.baudrate,
             "timeout": 0.05,
@@ -173,7 +173,7 @@ class SerialLink:
         self._threads = []
 
     # -- reading ----------------------------------------------------------------------------------
-    def _readable(self, port: serial.SerialBase, gen: int) -> None:
+    def _readable(self, port: serial.Serial, gen: int) -> None:
         """The loop saw the descriptor readable: take everything there in one read (the timeout is 0)."""
         if gen != self._generation:
             return
@@ -188,7 +188,7 @@ class SerialLink:
         self._observe("rx", data)
         self.on_bytes(data)
 
-    def _read_loop(self, port: serial.SerialBase, gen: int) -> None:
+    def _read_loop(self, port: serial.Serial, gen: int) -> None:
         """Ports without a descriptor: pyserial's own blocking read, in a thread."""
         while gen == self._generation:
             try:
@@ -201,7 +201,7 @@ class SerialLink:
                 self._observe("rx", data)
                 self._from_thread(self._deliver, gen, data)
 
-    def _write_loop(self, port: serial.SerialBase, q: queue.SimpleQueue[bytes | None], gen: int) -> None:
+    def _write_loop(self, port: serial.Serial, q: queue.SimpleQueue[bytes | None], gen: int) -> None:
         """Write what is queued, in order, until :meth:`close` (its sentinel comes after every frame queued
         before it, so a last stop frame still goes out); then close the port here, off the loop: pyserial's
         socket:// close sleeps 0.3 s, and a tty's may wait for its output to drain."""
