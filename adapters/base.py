@@ -30,6 +30,8 @@ from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from schemas.base import InboundModel
+
 __all__ = [
     "Adapter",
     "AircraftPose",
@@ -42,6 +44,7 @@ __all__ = [
     "Domain",
     "FrameObserver",
     "GimbalAttitude",
+    "Handler",
     "InvalidParameters",
     "LinkStats",
     "MethodNotSupported",
@@ -174,6 +177,8 @@ class TelemetrySink(Protocol):
         ...
 
 
+#: a method's coroutine; it takes the request model its method is registered with (validated by the
+#: dispatcher), which differs per method, hence ``Any`` here and the concrete model in each handler
 Handler = Callable[[Any], Awaitable[CallResult]]
 
 
@@ -249,7 +254,7 @@ class Adapter(abc.ABC):
     def supports(self, method: str) -> bool:
         return method in self.handlers
 
-    async def call(self, method: str, data: Any) -> CallResult:
+    async def call(self, method: str, data: InboundModel) -> CallResult:
         handler = self.handlers.get(method)
         if handler is None:
             raise MethodNotSupported(f"{method} is not supported by device {self.info.sn}")

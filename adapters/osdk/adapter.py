@@ -38,9 +38,9 @@ import contextlib
 import logging
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import Any
 
 from adapters.base import (
     AircraftPose,
@@ -49,11 +49,19 @@ from adapters.base import (
     DeviceNotConnected,
     DeviceRejected,
     DeviceTimeout,
+    Handler,
     InvalidParameters,
     TelemetrySink,
 )
 from adapters.osdk import commands as cmds
 from adapters.osdk.config import DEFAULT_FREQUENCIES, OsdkDeviceSettings
+from adapters.osdk.extensions import (
+    FollowMeStart,
+    FollowMeTarget,
+    HotpointStart,
+    IdleVelocity,
+    Pause,
+)
 from adapters.osdk.protocol import (
     Decoder,
     DuplicateFilter,
@@ -68,7 +76,10 @@ from adapters.serial_link import LinkError, SerialLink
 from adapters.supervision import SupervisedAdapter
 from adapters.wire.layout import LayoutError
 from adapters.wire.stream import BadFrame
+from schemas.base import InboundModel
+from schemas.envelope import EmptyRequest
 from schemas.results import ResultCode, ground_station_ack
+from schemas.services import FlightAuthorityGrab, FlyToPoint, FlyToPointStop, TakeoffToPoint
 
 log = logging.getLogger(__name__)
 
@@ -173,7 +184,8 @@ class AircraftAdapter(SupervisedAdapter):
         super().__init__(DeviceInfo.of(settings.sn, settings.product), settings, now)
         self.deadline = settings.deadline
         self._decoder = Decoder()
-        self._sessions = SessionTable()
+        # each command waiting for its ACK is tagged with its waiter: the future and the command's name
+        self._sessions: SessionTable[tuple[asyncio.Future[cmds.Message], str]] = SessionTable()
         self._dups = DuplicateFilter()
         self.activated = False
         self._next_activation = 0.0  # when an unactivated FC is next asked (version, activation, rates)
@@ -360,7 +372,9 @@ class AircraftAdapter(SupervisedAdapter):
                 with contextlib.suppress(LinkError):
                     self._write(frame)
             for p in res.expired:
-                fut, name = _waiter(p.tag)
+                if p.tag is None:
+                    continue  # nothing waits for it
+                fut, name = p.tag
                 if not fut.done():
                     fut.set_exception(DeviceTimeout(f"aircraft {self.info.sn} did not acknowledge {name}"))
             await asyncio.sleep(0.02)
@@ -372,7 +386,9 @@ class AircraftAdapter(SupervisedAdapter):
 
     def _fail_pending(self, exc: Exception) -> None:
         for p in self._sessions.clear():
-            fut, _ = _waiter(p.tag)
+            if p.tag is None:
+                continue  # nothing waits for it
+            fut, _ = p.tag
             if not fut.done():
                 fut.set_exception(exc)
 
@@ -439,7 +455,9 @@ class AircraftAdapter(SupervisedAdapter):
             if p is None:
                 self.unmatched_replies += 1  # late (after its deadline) or unknown: never matched to anything
                 return
-            fut, name = _waiter(p.tag)
+            if p.tag is None:
+                return  # nothing waits for it
+            fut, name = p.tag
             if fut.done():
                 return
             try:
@@ -626,7 +644,7 @@ class AircraftAdapter(SupervisedAdapter):
             raise DeviceRejected(result, f"flight controller refused: {text} (0x{code:04X})")
         raise DeviceRejected(ResultCode.BUSY, "flight controller still busy obtaining control")
 
-    async def _grab(self, data: Any) -> CallResult:
+    async def _grab(self, data: FlightAuthorityGrab) -> CallResult:
         self._require_online()
         await self._obtain(1)
         return CallResult()
@@ -731,7 +749,7 @@ class AircraftAdapter(SupervisedAdapter):
             if task.kind == "takeoff":
                 self._progress(task, "task_finish", last)
 
-    async def _fly_to_point(self, data: Any) -> CallResult:
+    async def _fly_to_point(self, data: FlyToPoint) -> CallResult:
         self._require_online()
         if data.max_speed <= 0:
             raise InvalidParameters("max_speed must be at least 1 m/s to fly")
@@ -762,7 +780,7 @@ class AircraftAdapter(SupervisedAdapter):
         self._start_watch(task)
         return CallResult()
 
-    async def _fly_to_point_stop(self, data: Any) -> CallResult:
+    async def _fly_to_point_stop(self, data: FlyToPointStop) -> CallResult:
         self._require_online()
         await self._gs("wp_start_stop", {"start": 1})
         task = self.mission
@@ -781,7 +799,7 @@ class AircraftAdapter(SupervisedAdapter):
                 f"{self.settings.max_height:g} m"
             )
 
-    def _check_takeoff(self, data: Any) -> None:
+    def _check_takeoff(self, data: TakeoffToPoint) -> None:
         """Refuse (325001, naming the field) what this flight controller cannot honour, before anything
         is sent: an RC-loss action other than its configured failsafe (the protocol cannot set it), a
         go-home altitude outside 20..500 m (OSDK's own check) or one an M100 cannot be given, a height
@@ -832,7 +850,7 @@ class AircraftAdapter(SupervisedAdapter):
             )
 
     @staticmethod
-    def _exit_on_rc_lost(data: Any) -> bool:
+    def _exit_on_rc_lost(data: TakeoffToPoint) -> bool:
         """Exit the mission when the RC is lost? ``commander_mode_lost_action`` (Cloud API 1.x) or the
         older ``exit_wayline_when_rc_lost`` it replaces: 1 exit, 0 or absent continue; both given and
         different is refused."""
@@ -844,7 +862,7 @@ class AircraftAdapter(SupervisedAdapter):
             )
         return (new if new is not None else old) == 1
 
-    def _takeoff_route(self, data: Any) -> list[tuple[float, float, float]]:
+    def _takeoff_route(self, data: TakeoffToPoint) -> list[tuple[float, float, float]]:
         """The mission after the take-off (lat/lon degrees, height above take-off): straight up to
         ``security_takeoff_height``; in fixed-height commander mode up (or down) to
         ``commander_flight_height``, across at that height and down (or up) to the target; else straight
@@ -874,7 +892,7 @@ class AircraftAdapter(SupervisedAdapter):
                 f"(ret code {f['ack']})",
             )
 
-    async def _takeoff_to_point(self, data: Any) -> CallResult:
+    async def _takeoff_to_point(self, data: TakeoffToPoint) -> CallResult:
         self._require_online()
         if self.in_air:
             raise DeviceRejected(ResultCode.BUSY, "the aircraft is already in the air")
@@ -890,7 +908,7 @@ class AircraftAdapter(SupervisedAdapter):
         self._mission_task = asyncio.get_running_loop().create_task(self._takeoff_then_fly(task, data))
         return CallResult()
 
-    async def _takeoff_then_fly(self, task: Task, data: Any) -> None:
+    async def _takeoff_then_fly(self, task: Task, data: TakeoffToPoint) -> None:
         """After the take-off ACK: wait until airborne, then fly up and over to the target."""
         deadline = self._now() + self.settings.takeoff_timeout
         t = self.telemetry
@@ -914,11 +932,10 @@ class AircraftAdapter(SupervisedAdapter):
             return
         await self._watch(task)
 
-    def _extension(self, method: str) -> Callable[[Any], Any]:
-        async def call(data: Any) -> CallResult:
+    def _extension(self, method: str) -> Handler:
+        async def call(data: InboundModel) -> CallResult:
             self._require_online()
-            result: CallResult = await _EXTENSION_CALLS[method](self, data)
-            return result
+            return await _EXTENSION_CALLS[method](self, data)
 
         return call
 
@@ -926,7 +943,7 @@ class AircraftAdapter(SupervisedAdapter):
 # -- extension services: method → coroutine(adapter, data) ---------------------------------------------
 
 
-async def _ext_pause(adapter: AircraftAdapter, name: str, data: Any) -> CallResult:
+async def _ext_pause(adapter: AircraftAdapter, name: str, data: Pause) -> CallResult:
     await adapter._gs(name, {"pause": 0 if data.pause else 1})
     return CallResult()
 
@@ -938,17 +955,17 @@ async def _ext_plain(
     return CallResult()
 
 
-async def _ext_idle_set(adapter: AircraftAdapter, data: Any) -> CallResult:
+async def _ext_idle_set(adapter: AircraftAdapter, data: IdleVelocity) -> CallResult:
     msg = await adapter._gs("wp_set_idle_velocity", {"idle_velocity": data.velocity})
     return CallResult(0, {"idle_velocity": float(msg.fields["idle_velocity"])})
 
 
-async def _ext_idle_get(adapter: AircraftAdapter, data: Any) -> CallResult:
+async def _ext_idle_get(adapter: AircraftAdapter, data: EmptyRequest) -> CallResult:
     msg = await adapter._gs("wp_get_idle_velocity", {"arbitrary": 0})
     return CallResult(0, {"idle_velocity": float(msg.fields["idle_velocity"])})
 
 
-async def _ext_download(adapter: AircraftAdapter, data: Any) -> CallResult:
+async def _ext_download(adapter: AircraftAdapter, data: EmptyRequest) -> CallResult:
     init = await adapter._gs("wp_download_init", {"arbitrary": 0})
     points = []
     for index in range(int(init.fields["length"])):
@@ -971,7 +988,7 @@ async def _ext_download(adapter: AircraftAdapter, data: Any) -> CallResult:
     return CallResult(0, out)
 
 
-async def _ext_hotpoint(adapter: AircraftAdapter, data: Any) -> CallResult:
+async def _ext_hotpoint(adapter: AircraftAdapter, data: HotpointStart) -> CallResult:
     fields = {
         "version": 0,
         "hp_latitude": math.radians(data.latitude),
@@ -987,7 +1004,7 @@ async def _ext_hotpoint(adapter: AircraftAdapter, data: Any) -> CallResult:
     return CallResult(0, {"max_radius": float(msg.fields.get("max_radius", 0.0))})
 
 
-async def _ext_hotpoint_download(adapter: AircraftAdapter, data: Any) -> CallResult:
+async def _ext_hotpoint_download(adapter: AircraftAdapter, data: EmptyRequest) -> CallResult:
     f = (await adapter._gs("hp_download", {"arbitrary": 0})).fields
     out = {
         "latitude": math.degrees(f["hp_latitude"]),
@@ -1000,7 +1017,7 @@ async def _ext_hotpoint_download(adapter: AircraftAdapter, data: Any) -> CallRes
     return CallResult(0, out)
 
 
-async def _ext_followme(adapter: AircraftAdapter, data: Any) -> CallResult:
+async def _ext_followme(adapter: AircraftAdapter, data: FollowMeStart) -> CallResult:
     fields = {
         "follow_mode": 0,
         "yaw_mode": 1 if data.point_to_target else 0,
@@ -1012,7 +1029,7 @@ async def _ext_followme(adapter: AircraftAdapter, data: Any) -> CallResult:
     return CallResult()
 
 
-async def _ext_followme_target(adapter: AircraftAdapter, data: Any) -> CallResult:
+async def _ext_followme_target(adapter: AircraftAdapter, data: FollowMeTarget) -> CallResult:
     fields = {"latitude": math.radians(data.latitude), "longitude": math.radians(data.longitude),
               "altitude": data.altitude}  # fmt: skip
     await adapter.command("fm_update_target", fields)  # no ACK: the send is the result
@@ -1024,19 +1041,16 @@ async def _ext_task(adapter: AircraftAdapter, task: str) -> CallResult:
     return CallResult()
 
 
-async def _ext_release(adapter: AircraftAdapter, data: Any) -> CallResult:
+async def _ext_release(adapter: AircraftAdapter, data: EmptyRequest) -> CallResult:
     await adapter._obtain(0)
     if adapter._sink is not None:
         adapter._sink.authority_lost(adapter.info.sn)
     return CallResult()
 
 
-def _waiter(tag: object) -> tuple[asyncio.Future[cmds.Message], str]:
-    """A pending frame's tag: the future its ACK resolves and the command's name (set where it is sent)."""
-    return cast("tuple[asyncio.Future[cmds.Message], str]", tag)
-
-
-_EXTENSION_CALLS: dict[str, Callable[[AircraftAdapter, Any], Any]] = {
+#: the request model each coroutine takes is the one its method is registered with (extensions.EXTENSIONS),
+#: validated by the dispatcher before the call
+_EXTENSION_CALLS: dict[str, Callable[[AircraftAdapter, Any], Awaitable[CallResult]]] = {
     "x_osdk_waypoint_pause": lambda a, d: _ext_pause(a, "wp_pause_resume", d),
     "x_osdk_waypoint_idle_velocity_set": _ext_idle_set,
     "x_osdk_waypoint_idle_velocity_get": _ext_idle_get,

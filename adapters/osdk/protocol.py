@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import Generic, TypeVar
 
 from adapters.wire.dji_frame import (
     BAD_HEADER_CRC,
@@ -239,8 +240,12 @@ class SentFrame:
     seq: int
 
 
+#: what the sender attaches to a command to find its waiter again (the adapter: a future and the name)
+TagT = TypeVar("TagT")
+
+
 @dataclass(slots=True)
-class Pending:
+class Pending(Generic[TagT]):
     """A command waiting for its ACK; ``frame`` is resent unchanged (same session, same seq)."""
 
     session: int
@@ -251,18 +256,18 @@ class Pending:
     deadline: float
     timeout: float
     retries_left: int
-    tag: object = None
+    tag: TagT | None = None
 
 
 @dataclass(frozen=True, slots=True)
-class PollResult:
+class PollResult(Generic[TagT]):
     """Frames to write again now, and commands that ran out of retries (answer them with a timeout)."""
 
     resend: tuple[bytes, ...] = ()
-    expired: tuple[Pending, ...] = ()
+    expired: tuple[Pending[TagT], ...] = ()
 
 
-class SessionTable:
+class SessionTable(Generic[TagT]):
     """Sender side: one global seq incremented per new command, sessions 2..31 handed out round-robin
     to commands that need an ACK, their frames kept for retransmission, ACKs matched by
     ``(session, seq)`` (the only safe key: ACK frames carry no CmdSet/CmdID)."""
@@ -272,7 +277,7 @@ class SessionTable:
     def __init__(self, first_seq: int = 0) -> None:
         self._seq = first_seq & 0xFFFF
         self._next_session = FIRST_REQUIRED_SESSION
-        self._pending: dict[tuple[int, int], Pending] = {}
+        self._pending: dict[tuple[int, int], Pending[TagT]] = {}
 
     def next_seq(self) -> int:
         seq = self._seq
@@ -299,7 +304,7 @@ class SessionTable:
         mode: SessionMode = SessionMode.ACK_REQUIRED,
         timeout: float = 0.5,
         retries: int = 2,
-        tag: object = None,
+        tag: TagT | None = None,
     ) -> SentFrame:
         """Frame a new command. Modes 1 and 2 are remembered until ACKed or expired; mode 1 is never
         resent (``retries`` is ignored), mode 2 is resent ``retries`` times, ``timeout`` apart."""
@@ -315,16 +320,16 @@ class SessionTable:
             )
         return SentFrame(frame, session, seq)
 
-    def on_ack(self, frame: Frame) -> Pending | None:
+    def on_ack(self, frame: Frame) -> Pending[TagT] | None:
         """The command this ACK answers (and forget it), or None for a late or unknown ACK."""
         if not frame.is_ack:
             return None
         return self._pending.pop((frame.session, frame.seq), None)
 
-    def poll(self, now: float) -> PollResult:
+    def poll(self, now: float) -> PollResult[TagT]:
         """Resend what is due, expire what has no retries left. Call at :meth:`next_deadline`."""
         resend: list[bytes] = []
-        expired: list[Pending] = []
+        expired: list[Pending[TagT]] = []
         for key, p in list(self._pending.items()):
             if p.deadline > now:
                 continue
@@ -340,10 +345,10 @@ class SessionTable:
         return min((p.deadline for p in self._pending.values()), default=None)
 
     @property
-    def pending(self) -> tuple[Pending, ...]:
+    def pending(self) -> tuple[Pending[TagT], ...]:
         return tuple(self._pending.values())
 
-    def clear(self) -> tuple[Pending, ...]:
+    def clear(self) -> tuple[Pending[TagT], ...]:
         """Drop everything (link closed); returns what was waiting so the caller can fail it."""
         dropped = tuple(self._pending.values())
         self._pending.clear()

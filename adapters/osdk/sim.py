@@ -327,7 +327,7 @@ class OsdkFcModel:
         self._decoder = Decoder()
         self._rx_at: float | None = None  # last bytes in, while the decoder may hold a partial frame
         self._dups = DuplicateFilter()
-        self._table = SessionTable()
+        self._table: SessionTable[None] = SessionTable()  # nothing waits on its pushes
         self._outbox: list[tuple[float, bytes]] = []
         self._drop = 0
         self.actions: Counter[str] = Counter()
@@ -1008,8 +1008,7 @@ class OsdkFcModel:
         """Hover; ``None`` brakes first and holds where the aircraft stops."""
         self._sp = None
         self._hold = hold
-        self._yaw_target = None
-        self._yaw_rate_cmd = 0.0
+        self._clear_yaw()
         self.task = "hover" if self.in_air else "ground"
 
     def advance(self, now: float) -> None:

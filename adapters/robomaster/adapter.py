@@ -69,10 +69,12 @@ from adapters.robomaster.commands import (
     encode_message,
 )
 from adapters.robomaster.config import RobomasterDeviceSettings
+from adapters.robomaster.extensions import ChassisVelocity, GimbalAngle, Interaction, RobotRequest
 from adapters.robomaster.protocol import Decoder, Frame
 from adapters.serial_link import LinkError, SerialLink
 from adapters.supervision import SupervisedAdapter
 from schemas.results import ResultCode
+from schemas.services import CameraScreenDrag, FlightAuthorityGrab, GimbalReset
 
 log = logging.getLogger(__name__)
 
@@ -424,16 +426,16 @@ class RobotAdapter(SupervisedAdapter):
         return self._drag_task is not None
 
     # -- Cloud API methods ------------------------------------------------------------------------
-    async def _authority_grab(self, data: Any) -> CallResult:
+    async def _authority_grab(self, data: FlightAuthorityGrab) -> CallResult:
         if not self._online:
             raise DeviceNotConnected(f"robot {self.info.sn} is not connected")
         return CallResult()
 
-    async def _x_chassis_velocity(self, data: Any) -> CallResult:
+    async def _x_chassis_velocity(self, data: ChassisVelocity) -> CallResult:
         self.set_velocity(float(data.vx), float(data.vy), float(data.wz), hold=data.duration)
         return CallResult()
 
-    async def _x_gimbal_angle(self, data: Any) -> CallResult:
+    async def _x_gimbal_angle(self, data: GimbalAngle) -> CallResult:
         s = self.settings
         pitch = float(data.pitch)
         if not s.pitch_min_deg <= pitch <= s.pitch_max_deg:
@@ -442,14 +444,14 @@ class RobotAdapter(SupervisedAdapter):
         self._gimbal_to(float(data.yaw), pitch)
         return CallResult()
 
-    async def _x_stop(self, data: Any) -> CallResult:
+    async def _x_stop(self, data: RobotRequest) -> CallResult:
         if not self._online:
             raise DeviceNotConnected(f"robot {self.info.sn} is not connected")
         if not self._halt(STOP_OPERATOR):
             raise DeviceNotConnected(f"robot {self.info.sn}: serial link is down")
         return CallResult()
 
-    async def _x_interaction(self, data: Any) -> CallResult:
+    async def _x_interaction(self, data: Interaction) -> CallResult:
         control = self._control
         if control.wrapped and data.data_cmd_id == control.data_cmd_id:
             raise InvalidParameters(
@@ -468,7 +470,7 @@ class RobotAdapter(SupervisedAdapter):
         return CallResult()
 
     # -- the gimbal as a payload ------------------------------------------------------------------
-    async def _screen_drag(self, data: Any) -> CallResult:
+    async def _screen_drag(self, data: CameraScreenDrag) -> CallResult:
         s = self.settings
         # Cloud API directions (as for the R SDK gimbal): positive yaw_speed pans right, i.e.
         # clockwise, which is negative on the wire's CCW yaw; positive pitch_speed tilts up.
@@ -512,7 +514,7 @@ class RobotAdapter(SupervisedAdapter):
             self._drag_task.cancel()
             self._drag_task = None
 
-    async def _gimbal_reset(self, data: Any) -> CallResult:
+    async def _gimbal_reset(self, data: GimbalReset) -> CallResult:
         mode = int(data.reset_mode)
         yaw, pitch = self.gimbal_setpoint
         down = self.settings.pitch_min_deg

@@ -64,11 +64,31 @@ from adapters.rsdk.commands import (
     lookup,
 )
 from adapters.rsdk.config import RsdkDeviceSettings
+from adapters.rsdk.extensions import (
+    AngleGet,
+    AutoCalibration,
+    FocusPosition,
+    FollowModeSet,
+    GimbalPosition,
+    LimitAngles,
+    Stiffness,
+)
 from adapters.rsdk.link import CanLink, LinkError
 from adapters.rsdk.protocol import Frame, encode
 from adapters.supervision import SupervisedAdapter
 from adapters.wire.stream import DecoderStats
 from schemas.results import ResultCode
+from schemas.services import (
+    CameraAim,
+    CameraFocalLengthSet,
+    CameraModeSwitch,
+    CameraPhotoTake,
+    CameraRecordingStart,
+    CameraRecordingStop,
+    CameraScreenDrag,
+    GimbalReset,
+    PayloadRequest,
+)
 
 log = logging.getLogger(__name__)
 
@@ -440,7 +460,7 @@ class GimbalAdapter(SupervisedAdapter):
         return body
 
     # -- Cloud API methods ------------------------------------------------------------------------
-    async def _screen_drag(self, data: Any) -> CallResult:
+    async def _screen_drag(self, data: CameraScreenDrag) -> CallResult:
         s = self.settings
         yaw = 0.0 if data.locked else float(data.yaw_speed)
         pitch = float(data.pitch_speed)
@@ -481,7 +501,7 @@ class GimbalAdapter(SupervisedAdapter):
                         {"yaw_speed": 0, "roll_speed": 0, "pitch_speed": 0, "ctrl_byte": ctrl},
                     )
 
-    async def _aim(self, data: Any) -> CallResult:
+    async def _aim(self, data: CameraAim) -> CallResult:
         s = self.settings
         d_yaw = (float(data.x) - 0.5) * s.fov_h_deg
         d_pitch = (0.5 - float(data.y)) * s.fov_v_deg
@@ -498,7 +518,7 @@ class GimbalAdapter(SupervisedAdapter):
     def _pitch_down(self) -> int:
         return round(max(PITCH_RANGE[0], -90.0) * 10)
 
-    async def _gimbal_reset(self, data: Any) -> CallResult:
+    async def _gimbal_reset(self, data: GimbalReset) -> CallResult:
         mode = int(data.reset_mode)
         if mode == 0:
             await self._command("recenter_selfie", {"recenter_and_selfie_command": 0x01}, ResultCode.BUSY)
@@ -521,21 +541,21 @@ class GimbalAdapter(SupervisedAdapter):
     async def _camera(self, command: int, failure: int) -> None:
         await self._command("camera_control", {"camera_control_command": command}, failure)
 
-    async def _photo(self, data: Any) -> CallResult:
+    async def _photo(self, data: CameraPhotoTake) -> CallResult:
         await self._camera(0x0001, ResultCode.PHOTO_FAILED)
         return CallResult()
 
-    async def _recording_start(self, data: Any) -> CallResult:
+    async def _recording_start(self, data: CameraRecordingStart) -> CallResult:
         await self._camera(0x0003, ResultCode.RECORDING_START_FAILED)
         self.recording = True
         return CallResult()
 
-    async def _recording_stop(self, data: Any) -> CallResult:
+    async def _recording_stop(self, data: CameraRecordingStop) -> CallResult:
         await self._camera(0x0004, ResultCode.RECORDING_STOP_FAILED)
         self.recording = False
         return CallResult()
 
-    async def _mode_switch(self, data: Any) -> CallResult:
+    async def _mode_switch(self, data: CameraModeSwitch) -> CallResult:
         # Seed 000 has no camera-mode command (0x0D 0x00 takes a photo or starts/stops recording in any
         # mode), and an answer of 0 without a frame on the wire would be a fake result.
         raise MethodNotSupported(
@@ -543,24 +563,24 @@ class GimbalAdapter(SupervisedAdapter):
             "work in any mode"
         )
 
-    async def _zoom(self, data: Any) -> CallResult:
+    async def _zoom(self, data: CameraFocalLengthSet) -> CallResult:
         raise MethodNotSupported("R SDK gimbals have no zoom command (camera_focal_length_set)")
 
     # -- extension methods ------------------------------------------------------------------------
-    async def _x_limit_set(self, data: Any) -> CallResult:
+    async def _x_limit_set(self, data: LimitAngles) -> CallResult:
         names = ("pitch_max", "pitch_min", "yaw_max", "yaw_min", "roll_max", "roll_min")
         await self._command(
             "set_limit_angle", {"ctrl_byte": 0x01, **{n: getattr(data, n) for n in names}}, ResultCode.BUSY
         )
         return CallResult()
 
-    async def _x_limit_get(self, data: Any) -> CallResult:
+    async def _x_limit_get(self, data: PayloadRequest) -> CallResult:
         msg = await self._command("get_limit_angle", {"ctrl_byte": 0x01}, ResultCode.BUSY)
         assert msg is not None  # get_limit_angle has a reply frame
         names = ("pitch_max", "pitch_min", "yaw_max", "yaw_min", "roll_max", "roll_min")
         return CallResult(0, {n: msg.fields[n] for n in names})
 
-    async def _x_stiffness_set(self, data: Any) -> CallResult:
+    async def _x_stiffness_set(self, data: Stiffness) -> CallResult:
         fields = {
             "ctrl_byte": 0x01,
             "pitch_stiffness": data.pitch,
@@ -570,7 +590,7 @@ class GimbalAdapter(SupervisedAdapter):
         await self._command("set_stiffness", fields, ResultCode.BUSY)
         return CallResult()
 
-    async def _x_stiffness_get(self, data: Any) -> CallResult:
+    async def _x_stiffness_get(self, data: PayloadRequest) -> CallResult:
         msg = await self._command("get_stiffness", {"ctrl_byte": 0x01}, ResultCode.BUSY)
         assert msg is not None  # get_stiffness has a reply frame
         f = msg.fields
@@ -578,12 +598,12 @@ class GimbalAdapter(SupervisedAdapter):
             0, {"pitch": f["pitch_stiffness"], "roll": f["roll_stiffness"], "yaw": f["yaw_stiffness"]}
         )
 
-    async def _x_follow_mode(self, data: Any) -> CallResult:
+    async def _x_follow_mode(self, data: FollowModeSet) -> CallResult:
         fields = {"operating_mode": int(data.mode), "recenter_and_selfie_command": 0x00}
         await self._command("follow_mode", fields, ResultCode.BUSY)
         return CallResult()
 
-    async def _x_position(self, data: Any) -> CallResult:
+    async def _x_position(self, data: GimbalPosition) -> CallResult:
         ctrl = 0x01 if data.absolute else 0x00
         values = {}
         for bit, axis in ((0x02, "yaw"), (0x04, "roll"), (0x08, "pitch")):
@@ -595,15 +615,15 @@ class GimbalAdapter(SupervisedAdapter):
         await self._command("position_control", fields, ResultCode.BUSY)
         return CallResult()
 
-    async def _x_selfie(self, data: Any) -> CallResult:
+    async def _x_selfie(self, data: PayloadRequest) -> CallResult:
         await self._command("recenter_selfie", {"recenter_and_selfie_command": 0x02}, ResultCode.BUSY)
         return CallResult()
 
-    async def _x_active_track(self, data: Any) -> CallResult:
+    async def _x_active_track(self, data: PayloadRequest) -> CallResult:
         await self._command("active_track", {"enable_active_track": 0x03}, ResultCode.BUSY)
         return CallResult()
 
-    async def _x_focus(self, data: Any) -> CallResult:
+    async def _x_focus(self, data: FocusPosition) -> CallResult:
         # sub-command 0x01 has no reply frame (seed Figure 32): answered once it is on the bus
         fields = {
             "command_sub_id": 0x01,
@@ -614,14 +634,14 @@ class GimbalAdapter(SupervisedAdapter):
         await self._command("focus_motor", fields, ResultCode.BUSY)
         return CallResult()
 
-    async def _x_calibration(self, data: Any) -> CallResult:
+    async def _x_calibration(self, data: AutoCalibration) -> CallResult:
         # seed Figure 29: bit 0 start/stop, bits 7:1 the self-tuning type, and "Self-tuning type selects
         # 1" (single attitude mode): start 0x03, stop 0x02. No reply frame: answered once on the bus.
         item = {"id": 0x00, "value": (SELF_TUNING_TYPE << 1) | (0x01 if data.start else 0x00)}
         await self._command("auto_calibration", {"tlv_buffer": [item]}, ResultCode.BUSY)
         return CallResult()
 
-    async def _x_angle(self, data: Any) -> CallResult:
+    async def _x_angle(self, data: AngleGet) -> CallResult:
         """0x0E 0x02; a legacy-firmware reply is read in this gimbal's ``legacy_angle_order``."""
         msg = await self._command("get_angle", {"ctrl_byte": 0x02 if data.joint else 0x01}, ResultCode.BUSY)
         assert msg is not None  # get_angle has a reply frame
@@ -631,7 +651,7 @@ class GimbalAdapter(SupervisedAdapter):
         kind = "joint" if f["data_type"] == 0x02 else "attitude"
         return CallResult(0, {"kind": kind, **{axis: f[axis] / 10 for axis in ("yaw", "roll", "pitch")}})
 
-    async def _x_version(self, data: Any) -> CallResult:
+    async def _x_version(self, data: PayloadRequest) -> CallResult:
         msg = await self._command("get_version", {"device_id": SDK_DEVICE_ID}, ResultCode.BUSY)
         assert msg is not None  # get_version has a reply frame
         self._version_from(msg.fields)
