@@ -285,14 +285,14 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
 def cmd_methods(ns: argparse.Namespace) -> int:
     reg = registry()
     if ns.method is None:
-        for kind in SENT_KINDS:
+        for listed in SENT_KINDS:
             title = (
                 "services (dji-gateway send METHOD …)"
-                if kind is TopicKind.SERVICES
+                if listed is TopicKind.SERVICES
                 else ("drc/down (dji-gateway send --drc METHOD …)")
             )
             print(title)
-            specs = reg.specs(kind)
+            specs = reg.specs(listed)
             width = max(len(s.method) for s in specs)
             for s in specs:
                 print(f"  {s.method:<{width}}  {s.summary}")

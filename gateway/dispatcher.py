@@ -48,9 +48,10 @@ from schemas import (
     reply_for,
     topic,
 )
+from schemas.base import InboundModel
 from schemas.envelope import ErrorOutput, ResultReply, ServicesReplyMessage
 from schemas.registry import Registry
-from schemas.services import DrcModeEnter
+from schemas.services import DrcModeEnter, PayloadAuthorityGrab
 
 log = logging.getLogger(__name__)
 
@@ -331,7 +332,9 @@ class Dispatcher:
         finally:
             self._pending -= 1
 
-    def _route(self, method: str, data: Any) -> tuple[Adapter | None, tuple[int, dict[str, Any] | None]]:
+    def _route(
+        self, method: str, data: InboundModel
+    ) -> tuple[Adapter | None, tuple[int, dict[str, Any] | None]]:
         index = getattr(data, "payload_index", None)
         if isinstance(index, str):
             adapter = self.devices.by_payload(index)
@@ -358,7 +361,9 @@ class Dispatcher:
             return None, (ResultCode.METHOD_NOT_SUPPORTED, {"reason": f"no device here supports {method}"})
         return serving[0], (0, None)
 
-    def _authority_check(self, method: str, data: Any, adapter: Adapter) -> tuple[int, dict[str, Any]] | None:
+    def _authority_check(
+        self, method: str, data: InboundModel, adapter: Adapter
+    ) -> tuple[int, dict[str, Any]] | None:
         if not self.settings.require_authority:
             return None
         if method in FLIGHT_METHODS and adapter.info.sn not in self.devices.authority.flight:
@@ -368,9 +373,9 @@ class Dispatcher:
             return ResultCode.NO_PAYLOAD_AUTHORITY, {"reason": "grab payload authority first"}
         return None
 
-    async def _grab_authority(self, method: str, data: Any) -> tuple[int, dict[str, Any] | None]:
+    async def _grab_authority(self, method: str, data: InboundModel) -> tuple[int, dict[str, Any] | None]:
         auth = self.devices.authority
-        if method == "payload_authority_grab":
+        if isinstance(data, PayloadAuthorityGrab):  # the model payload_authority_grab is validated to
             index = data.payload_index
             adapter = self.devices.by_payload(index)
             if adapter is None:
@@ -396,7 +401,9 @@ class Dispatcher:
             self.on_authority_change()
         return ResultCode.SUCCESS, None
 
-    async def _call(self, adapter: Adapter, method: str, data: Any) -> tuple[int, dict[str, Any] | None]:
+    async def _call(
+        self, adapter: Adapter, method: str, data: InboundModel
+    ) -> tuple[int, dict[str, Any] | None]:
         sn = adapter.info.sn
         logcontext.set_context(device=sn)
         if not adapter.online:

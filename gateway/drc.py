@@ -65,7 +65,7 @@ from gateway.mqtt import MqttBridge
 from gateway.ratelimit import TokenBucket
 from gateway.settings import BrokerSettings, GatewaySettings
 from schemas import ResultCode, TopicKind, echo_heart_beat, error_reply_from_validation, reply_for, topic
-from schemas.drc import SILENT_WHEN_ACCEPTED
+from schemas.drc import SILENT_WHEN_ACCEPTED, DroneControl
 from schemas.registry import Registry
 from schemas.services import DrcModeEnter
 
@@ -648,7 +648,7 @@ class DrcController:
         new sticks), answered to nobody. Any thread."""
         self._feed(ds.EStop(self.now(), self.session.session_id, _LOCAL))
 
-    def _to_body(self, data: Any) -> ds.SetPoint:
+    def _to_body(self, data: DroneControl) -> ds.SetPoint:
         x, y = float(data.x) * self.cfg.x_sign, float(data.y) * self.cfg.y_sign
         if self.cfg.swap_xy:  # x forward, y right
             return (x, y, float(data.h), float(data.w))
@@ -701,8 +701,8 @@ class DrcController:
         tid = f"drc-{request.method}-{self.session.session_id}-" + (
             f"seq-{seq}" if seq is not None else f"n-{self._forwarded}"
         )
-        result: int = int(ResultCode.INTERNAL_ERROR)
-        output: Any = {"reason": "no dispatcher to carry it out"}
+        result = int(ResultCode.INTERNAL_ERROR)
+        output: object = {"reason": "no dispatcher to carry it out"}  # else the reply's output, parsed JSON
         if self.call_service is not None:
             body = {
                 "tid": tid,
