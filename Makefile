@@ -86,4 +86,4 @@ schema: $(RUNTIME)
 	$(VENV)/bin/dji-gateway schema export
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis build *.egg-info
+	rm -rf $(VENV) .pytest_cache .ruff_cache .mypy_cache .hypothesis build *.egg-info
