@@ -160,7 +160,7 @@ def _rows(model: type[BaseModel], prefix: str, note_prefix: str, instance: BaseM
         if instance is not None:
             value = getattr(instance, name)
         elif info.default_factory is not None:
-            value = info.default_factory()  # type: ignore[call-arg]
+            value = info.get_default(call_default_factory=True)
         else:
             value = info.default
         sub = _model_of(info.annotation)

@@ -35,6 +35,8 @@ from gateway.mqtt import close_client
 
 if TYPE_CHECKING:
     import paho.mqtt.client as paho
+    from paho.mqtt.properties import Properties
+    from paho.mqtt.reasoncodes import ReasonCode
     from rich.console import RenderableType
 
 __all__ = [
@@ -262,7 +264,14 @@ class _Link:
         self.client.on_message = lambda c, u, msg: self._on_message(msg.topic, bytes(msg.payload))
         self.client.on_subscribe = lambda *a: self._subscribed.set()
 
-    def _connect_cb(self, client: paho.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
+    def _connect_cb(
+        self,
+        client: paho.Client,
+        userdata: Any,
+        flags: paho.ConnectFlags,
+        reason: ReasonCode,
+        props: Properties | None,
+    ) -> None:
         if reason.is_failure:
             self.refusal = str(reason)
         self._connected.set()

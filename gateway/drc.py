@@ -115,7 +115,7 @@ class MotionWriter:
         targets: Callable[[], Sequence[Adapter]],
         tick: Callable[[float], None],
         now: Callable[[], float],
-        on_failure: Callable[[Adapter, str, BaseException], None],
+        on_failure: Callable[[Adapter | None, str, BaseException], None],  # None: the tick failed
         on_sent: Callable[[float], None] | None = None,
     ) -> None:
         self.period = period
@@ -225,7 +225,7 @@ class MotionWriter:
 
     def _on_failure_safe(self, adapter: Adapter | None, what: str, exc: BaseException) -> None:
         try:
-            self._on_failure(adapter, what, exc)  # type: ignore[arg-type]
+            self._on_failure(adapter, what, exc)
         except Exception:
             log.exception("DRC failure hook failed")
 

@@ -42,6 +42,7 @@ import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
+from paho.mqtt.reasoncodes import ReasonCode
 
 from gateway.broker_link import Loss, OfflineBuffer, ReconnectPolicy
 from gateway.metrics import Metrics
@@ -658,7 +659,7 @@ class MqttBridge:
             self._loop.call_soon_threadsafe(fn)
 
     # -- paho callbacks (network thread) --------------------------------------------------------
-    def _on_socket_open(self, client: paho.Client, userdata: Any, sock: Any) -> None:
+    def _on_socket_open(self, client: paho.Client, userdata: Any, sock: paho.SocketLike) -> None:
         raw = _raw_socket(sock)
         try:
             if raw is None:
@@ -667,7 +668,14 @@ class MqttBridge:
         except (OSError, AttributeError):
             log.debug("could not set TCP_NODELAY on %r", type(sock).__name__)
 
-    def _on_connect(self, client: paho.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
+    def _on_connect(
+        self,
+        client: paho.Client,
+        userdata: Any,
+        flags: paho.ConnectFlags,
+        reason: ReasonCode,
+        props: Properties | None,
+    ) -> None:
         if reason.is_failure:
             self.last_refusal = str(reason)
             self._refused = True
@@ -699,7 +707,14 @@ class MqttBridge:
         with contextlib.suppress(RuntimeError):  # the loop closed during shutdown
             self._loop.call_soon_threadsafe(self._after_connect)
 
-    def _on_subscribe(self, client: paho.Client, userdata: Any, mid: int, reasons: Any, props: Any) -> None:
+    def _on_subscribe(
+        self,
+        client: paho.Client,
+        userdata: Any,
+        mid: int,
+        reasons: list[ReasonCode],
+        props: Properties | None,
+    ) -> None:
         if mid != self._sub_mid:
             return
         refused = [r for r in reasons if getattr(r, "is_failure", False)]
@@ -713,7 +728,14 @@ class MqttBridge:
         """Connected, and the broker has acknowledged the subscriptions (ready to receive requests)."""
         return self.connected and self._subscribed.is_set()
 
-    def _on_disconnect(self, client: paho.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
+    def _on_disconnect(
+        self,
+        client: paho.Client,
+        userdata: Any,
+        flags: paho.DisconnectFlags,
+        reason: ReasonCode,
+        props: Properties | None,
+    ) -> None:
         self._subscribed.clear()
         self._metrics.set("mqtt_connected", 0, link=self._name)
         with contextlib.suppress(RuntimeError):

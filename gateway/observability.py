@@ -24,7 +24,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import asdict
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
 from prometheus_client import CollectorRegistry
@@ -37,6 +37,9 @@ from prometheus_client.core import (
 from prometheus_client.registry import Collector
 
 from adapters.base import LinkStats
+
+if TYPE_CHECKING:  # read through the app, never built here
+    from gateway.drc import DrcController
 
 log = logging.getLogger(__name__)
 
@@ -253,10 +256,10 @@ class Observability:
         }
 
     def _drc(self) -> dict[str, Any]:
-        drc = getattr(self.app, "drc", None)
+        drc: DrcController | None = getattr(self.app, "drc", None)
         if drc is None:
             return {"state": 0, "active": False}
-        return drc.snapshot()  # type: ignore[no-any-return]
+        return drc.snapshot()
 
     # -- views ------------------------------------------------------------------------------------
     def status(self, snap: dict[str, Any] | None = None) -> dict[str, Any]:
