@@ -66,8 +66,18 @@ from gateway.wayline.task import (
     WaylineTask,
 )
 from schemas import TopicKind
+from schemas.base import InboundModel
 from schemas.registry import WAYLINE_METHODS
 from schemas.results import ResultCode
+from schemas.wayline import (
+    FlighttaskExecute,
+    FlighttaskPause,
+    FlighttaskPrepare,
+    FlighttaskRecovery,
+    FlighttaskUndo,
+    ReturnHome,
+    ReturnHomeCancel,
+)
 
 log = logging.getLogger(__name__)
 
@@ -134,7 +144,7 @@ class WaylineService:
         return None
 
     # -- services --------------------------------------------------------------------------------
-    async def call(self, method: str, data: Any) -> Result:
+    async def call(self, method: str, data: InboundModel) -> Result:
         aircraft = self._aircraft()
         if aircraft is None:
             return ResultCode.METHOD_NOT_SUPPORTED, {"reason": "no aircraft here flies waylines"}
@@ -148,7 +158,7 @@ class WaylineService:
         result: Result = await handler(aircraft, data)
         return result
 
-    async def _flighttask_prepare(self, aircraft: Any, data: Any) -> Result:
+    async def _flighttask_prepare(self, aircraft: Any, data: FlighttaskPrepare) -> Result:
         if data.out_of_control_action is not None and data.out_of_control_action != 0:
             return ResultCode.INVALID_PARAMETERS, {
                 "reason": "out_of_control_action: only 0 (return home), the FC's own failsafe"
@@ -175,7 +185,7 @@ class WaylineService:
                 return failure[0], {"reason": failure[1]}
         return ResultCode.SUCCESS, None
 
-    async def _load(self, aircraft: Any, url: str, fingerprint: str, prepare: Any) -> _File:
+    async def _load(self, aircraft: Any, url: str, fingerprint: str, prepare: FlighttaskPrepare) -> _File:
         """Download, check and parse; a trial plan from where the aircraft is now refuses what it cannot
         fly before anything is uploaded."""
         if not fingerprint.strip():
@@ -190,7 +200,7 @@ class WaylineService:
             self._plan(aircraft, route, prepare)
         return _File(digest, route)
 
-    def _plan(self, aircraft: Any, route: Route, prepare: Any) -> Any:
+    def _plan(self, aircraft: Any, route: Route, prepare: FlighttaskPrepare) -> Any:
         bp = prepare.break_point
         return aircraft.wayline.plan(
             route,
@@ -199,7 +209,7 @@ class WaylineService:
             break_point=(bp.wayline_id, bp.index, int(bp.state)) if bp is not None else None,
         )
 
-    def _log_ignored(self, data: Any) -> None:
+    def _log_ignored(self, data: FlighttaskPrepare) -> None:
         ignored = [
             name
             for name in (
@@ -215,7 +225,7 @@ class WaylineService:
         if data.executable_conditions is not None:
             log.info("wayline task %s: storage_capacity cannot be checked on this FC", data.flight_id)
 
-    async def _flighttask_execute(self, aircraft: Any, data: Any) -> Result:
+    async def _flighttask_execute(self, aircraft: Any, data: FlighttaskExecute) -> Result:
         task = self.book.get(data.flight_id)
         if task is not None and task.phase is Phase.PREPARED and task.request.task_type == 0:
             skew = abs(self.clock.time_ms() - (task.request.execute_time or self.clock.time_ms()))
@@ -238,7 +248,7 @@ class WaylineService:
             )
         return verdict.result, ({"reason": verdict.reason} if verdict.reason else None)
 
-    async def _flighttask_undo(self, aircraft: Any, data: Any) -> Result:
+    async def _flighttask_undo(self, aircraft: Any, data: FlighttaskUndo) -> Result:
         verdict = self.book.undo(list(data.flight_ids))
         if verdict.ok:
             for f in data.flight_ids:
@@ -248,11 +258,11 @@ class WaylineService:
                         file.cancel()
         return verdict.result, ({"reason": verdict.reason} if verdict.reason else None)
 
-    async def _flighttask_pause(self, aircraft: Any, data: Any) -> Result:
+    async def _flighttask_pause(self, aircraft: Any, data: FlighttaskPause) -> Result:
         return await self._hold_or_go(self.book.pause(), aircraft.wayline.pause, self.book.paused,
                                       ResultCode.WAYLINE_PAUSE_FAILED)  # fmt: skip
 
-    async def _flighttask_recovery(self, aircraft: Any, data: Any) -> Result:
+    async def _flighttask_recovery(self, aircraft: Any, data: FlighttaskRecovery) -> Result:
         return await self._hold_or_go(self.book.recovery(), aircraft.wayline.resume, self.book.resumed,
                                       ResultCode.WAYLINE_RESUME_FAILED)  # fmt: skip
 
@@ -275,7 +285,7 @@ class WaylineService:
         self._emit(task)
         return ResultCode.SUCCESS, None
 
-    async def _return_home(self, aircraft: Any, data: Any) -> Result:
+    async def _return_home(self, aircraft: Any, data: ReturnHome) -> Result:
         if not aircraft.in_air:
             return ResultCode.BUSY, {"reason": "the aircraft is on the ground"}
         task = self.book.active
@@ -293,7 +303,7 @@ class WaylineService:
         self._emit_rth()
         return ResultCode.SUCCESS, None
 
-    async def _return_home_cancel(self, aircraft: Any, data: Any) -> Result:
+    async def _return_home_cancel(self, aircraft: Any, data: ReturnHomeCancel) -> Result:
         if self._rth is None or not aircraft.wayline.mission_running:
             self._rth = None
             return ResultCode.BUSY, {"reason": "the aircraft is not returning home"}
