@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 from types import ModuleType
 from typing import TYPE_CHECKING, Any, Protocol
 
+from adapters.clock import SYSTEM_CLOCK, Clock
+
 if TYPE_CHECKING:
     from pydantic import BaseModel
 
@@ -102,7 +104,9 @@ class Family:
       ``product`` (the device's Cloud API domain and type: ``adapters.config.ProductSettings``) and
       ``osd_period`` (None: the gateway's); optionally ``payload_index`` (unique per gateway) and ``url``
       (a serial path the gateway checks before it starts).
-    - ``adapter``: called with the validated settings, returns an :class:`adapters.base.Adapter`.
+    - ``adapter``: called with the validated settings and the gateway's clock (``factory(settings,
+      clock=clock)``, an :class:`adapters.clock.Clock`: every timer the adapter keeps runs on it), returns
+      an :class:`adapters.base.Adapter`.
     - ``describe``: the CLI codec module: ``COMMANDS``, ``decode_bytes(data, **options)``,
       ``encode_command(name, seq, fields, **options)``; optionally ``decode_can_lines``/``encode_can``
       (a CAN family), ``CLI_OPTIONS`` (argparse options it reads), ``options_for(settings)`` (the decode
@@ -118,7 +122,7 @@ class Family:
 
     name: str
     settings: str | type[BaseModel]
-    adapter: str | Callable[[Any], Adapter]
+    adapter: str | Callable[..., Adapter]
     describe: str | ModuleType | None = None
     simulator: str | ModuleType | None = None
     extensions: str | ModuleType | None = None
@@ -134,10 +138,10 @@ class Family:
             raise TypeError(f"family {self.name!r}: {model.__name__}.type must be Literal[{self.name!r}]")
         return model
 
-    def build(self, settings: Any) -> Adapter:
-        """The adapter for one validated ``[[devices]]`` entry of this family."""
-        factory: Callable[[Any], Adapter] = _load(self.adapter)
-        return factory(settings)
+    def build(self, settings: Any, clock: Clock = SYSTEM_CLOCK) -> Adapter:
+        """The adapter for one validated ``[[devices]]`` entry of this family, keeping time on ``clock``."""
+        factory: Callable[..., Adapter] = _load(self.adapter)
+        return factory(settings, clock=clock)
 
     def describe_module(self) -> ModuleType | None:
         return None if self.describe is None else _load(self.describe)

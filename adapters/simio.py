@@ -5,6 +5,9 @@ module gives it a real OS byte boundary so the gateway talks to it through pyser
 ``socket://127.0.0.1:PORT``) or python-can's ``slcan`` interface exactly as it would to hardware.
 Loopback only. One client at a time on TCP (a serial port has one host too); a reconnecting client
 replaces the previous one.
+
+Time: a simulator keeps its own, real time (``time.monotonic``), as the device it stands for does; the
+gateway's injected clock is not the device's.
 """
 
 from __future__ import annotations

@@ -19,11 +19,11 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Callable
 from typing import Any, ClassVar, Protocol
 
 from adapters.absence import Absence
 from adapters.base import Adapter, DeviceInfo, FrameObserver, LinkStats, TelemetrySink
+from adapters.clock import Clock
 from adapters.wire.stream import DecoderStats, StreamDecoder
 
 __all__ = ["SupervisedAdapter", "SupervisedLink", "SupervisionTiming"]
@@ -107,10 +107,12 @@ class SupervisedAdapter(Adapter):
     #: replies or ACKs that matched no request in flight (late, duplicated, wrong seq); families count them
     unmatched_replies: int = 0
 
-    def __init__(self, info: DeviceInfo, timing: SupervisionTiming, now: Callable[[], float]) -> None:
+    def __init__(self, info: DeviceInfo, timing: SupervisionTiming, clock: Clock) -> None:
         self.info = info
         self._timing = timing
-        self._now = now
+        #: the gateway's clock: every deadline, interval and sleep of the adapter runs on it
+        self._clock = clock
+        self._now = clock.monotonic
         self._link = None
         self._sink: TelemetrySink | None = None
         self._tasks: list[asyncio.Task[None]] = []
@@ -139,13 +141,13 @@ class SupervisedAdapter(Adapter):
                     decision = self._absence.failed(self._now(), str(exc), what)
                     self._log.log(decision.level, "%s", decision.message)
                     self._set_online(False)
-                    await asyncio.sleep(decision.delay)
+                    await self._clock.sleep(decision.delay)
                     continue
                 if (back := self._absence.opened(self._now(), what)) is not None:
                     self._log.info("%s", back)
                 self._on_link_opened()
             await self._supervise_tick(self._now())
-            await asyncio.sleep(0.1)
+            await self._clock.sleep(0.1)
 
     async def _supervise_tick(self, now: float) -> None:
         """One pass of the loop with the link up. A family that does more on each pass overrides
@@ -244,6 +246,6 @@ class SupervisedAdapter(Adapter):
         for task in self._tasks:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await task
-        await asyncio.sleep(0.05)
+        await asyncio.sleep(0.05)  # real time, not the clock's: a link's writer thread keeps real time
         if self._link is not None:
             self._link.close()

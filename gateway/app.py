@@ -18,7 +18,7 @@ from collections.abc import Callable, Sequence
 from adapters import families
 from adapters.base import Adapter
 from gateway import logcontext
-from gateway.clock import Clock, SystemClock
+from gateway.clock import SYSTEM_CLOCK, Clock
 from gateway.cloud_requests import CloudRequests
 from gateway.devices import DeviceTable
 from gateway.dispatcher import Dispatcher
@@ -38,9 +38,9 @@ log = logging.getLogger(__name__)
 __all__ = ["GatewayApp", "build_adapters", "build_registry"]
 
 
-def build_adapters(settings: GatewaySettings) -> list[Adapter]:
-    """One adapter per ``[[devices]]`` entry, built by the family its ``type`` names."""
-    return [families.get(device.type).build(device) for device in settings.devices]
+def build_adapters(settings: GatewaySettings, clock: Clock = SYSTEM_CLOCK) -> list[Adapter]:
+    """One adapter per ``[[devices]]`` entry, built by the family its ``type`` names, on ``clock``."""
+    return [families.get(device.type).build(device, clock) for device in settings.devices]
 
 
 def build_registry() -> Registry:
@@ -66,11 +66,13 @@ class GatewayApp:
         metrics: Metrics | None = None,
     ) -> None:
         self.settings = settings
-        self.clock = clock or SystemClock()
+        #: the one clock: the dispatcher, the northbound, live control, every adapter built here, the
+        #: broker connection and the web console keep time on it (a test passes a ManualClock)
+        self.clock: Clock = clock or SYSTEM_CLOCK
         self.metrics = metrics or Metrics()
         logcontext.register_secrets_in(settings)  # broker password, device secrets: masked in every log line
         self.registry = build_registry()
-        self.devices = DeviceTable(adapters if adapters is not None else build_adapters(settings))
+        self.devices = DeviceTable(adapters if adapters is not None else build_adapters(settings, self.clock))
         self.stop_event = asyncio.Event()
         self.started = asyncio.Event()
         self.bridge: MqttBridge | None = None
@@ -96,6 +98,7 @@ class GatewayApp:
             subscriptions=subs,
             loop=loop,
             metrics=self.metrics,
+            clock=self.clock,
             buffered=lambda name: name.endswith("/osd"),  # osd waits out an outage (bounded), in order
         )
         outbox = _ObservedOutbox(bridge, self.published)
@@ -160,7 +163,9 @@ class GatewayApp:
         waylines = loop.create_task(wayline.run(self.stop_event), name="wayline")
         consumer = loop.create_task(self._consume(), name="inbound")
         if s.metrics.enabled:
-            self.observability = Observability(self, loop).start(s.metrics.host, s.metrics.port)
+            self.observability = Observability(self, loop, clock=self.clock).start(
+                s.metrics.host, s.metrics.port
+            )
         self.started.set()
         log.info("gateway %s running with %d device(s)", gw, len(self.devices))
         try:
@@ -211,6 +216,7 @@ class GatewayApp:
         await periodic
         if self.dispatcher is not None:
             with contextlib.suppress(TimeoutError):
+                # real time: a stopping gateway stops even when nobody advances a test's clock
                 await asyncio.wait_for(self.dispatcher.drain(), 2.0)
         if self.bridge is not None:
             await asyncio.to_thread(self.bridge.stop, offline)

@@ -1,46 +1,11 @@
-"""Time as a value: the dispatcher, live control and the northbound ask the :class:`Clock` that
-``GatewayApp(clock=)`` is given, so tests can drive them.
-
-``monotonic()`` for deadlines and intervals; ``time_ms()`` for the Cloud API's wall-clock
-``timestamp`` fields. Not yet everything: the adapters, the broker connection and the web console take a
-``now`` callable of their own (``time.monotonic`` by default), and the operator CLIs (``monitor``,
-``fly``) read the system clock; one clock passed from ``GatewayApp`` down is open work (issue #18).
+"""The gateway's name for the one injected clock: :mod:`adapters.clock` owns it (the adapters take the
+same clock and must not import ``gateway/``); this module re-exports it so gateway code and tests say
+``gateway.clock``. ``GatewayApp(clock=)`` hands it to the dispatcher, the northbound, live control, every
+adapter (through its family's ``build``), the broker connection and the web console.
 """
 
 from __future__ import annotations
 
-import time
-from typing import Protocol
+from adapters.clock import SYSTEM_CLOCK, Clock, ManualClock, SystemClock
 
-__all__ = ["Clock", "ManualClock", "SystemClock"]
-
-
-class Clock(Protocol):
-    def monotonic(self) -> float: ...
-
-    def time_ms(self) -> int: ...
-
-
-class SystemClock:
-    def monotonic(self) -> float:
-        return time.monotonic()
-
-    def time_ms(self) -> int:
-        return time.time_ns() // 1_000_000
-
-
-class ManualClock:
-    """A clock that moves only when told (unit tests of timing logic)."""
-
-    def __init__(self, start: float = 1000.0, epoch_ms: int = 1_700_000_000_000) -> None:
-        self.now = start
-        self._epoch_ms = epoch_ms - int(start * 1000)
-
-    def monotonic(self) -> float:
-        return self.now
-
-    def time_ms(self) -> int:
-        return self._epoch_ms + int(self.now * 1000)
-
-    def advance(self, seconds: float) -> None:
-        self.now += seconds
+__all__ = ["SYSTEM_CLOCK", "Clock", "ManualClock", "SystemClock"]

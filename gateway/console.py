@@ -13,6 +13,8 @@ broker link is a plain paho client. :class:`MonitorState` is pure (topic, payloa
 out; :func:`render` draws it), so both modes show the same facts. Knows nothing of devices or bytes.
 Passwords are read from the environment (``DJIGW_CONSOLE_PASSWORD``), never from the command line,
 where ``ps`` would show them.
+
+Time: reads the system clock itself (a separate process; the gateway's injected clock is the service's).
 """
 
 from __future__ import annotations

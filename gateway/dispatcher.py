@@ -410,7 +410,7 @@ class Dispatcher:
             return ResultCode.DEVICE_NOT_CONNECTED, {"reason": f"device {sn} is not connected"}
         try:
             deadline = min(adapter.deadline or self.settings.request_timeout, MAX_DEADLINE)
-            outcome: CallResult = await asyncio.wait_for(adapter.call(method, data), timeout=deadline)
+            outcome: CallResult = await self.clock.wait_for(adapter.call(method, data), deadline)
         except TimeoutError:
             self.metrics.inc("device_timeouts_total", device=sn)
             return ResultCode.DEVICE_TIMEOUT, {"reason": f"device {sn} did not answer in time"}

@@ -141,7 +141,9 @@ class MotionWriter:
             self._setpoint, self._stream, self._dirty, self._since = setpoint, stream, True, since
             self._cond.notify()
         if threading.current_thread() is not self._thread:
-            time.sleep(0)  # hand the interpreter to the writer now: the frame goes out before the reply
+            # not a timer (no clock): hand the interpreter to the writer, so the frame goes out before the
+            # reply
+            time.sleep(0)
 
     def emergency(self) -> None:
         with self._cond:
@@ -491,6 +493,7 @@ class DrcController:
             loop=self.loop,
             metrics=self.metrics,
             name="drc",
+            clock=self.clock,
             inline=lambda topic_name, payload: self._inline_dedicated(session, topic_name, payload),
             on_disconnected=lambda reason: self._link_lost(session, reason),
         )
@@ -502,7 +505,7 @@ class DrcController:
                     return bridge, 0
                 if bridge.last_refusal is not None:
                     break
-                await asyncio.sleep(0.02)
+                await self.clock.sleep(0.02)
         except asyncio.CancelledError:
             await asyncio.to_thread(bridge.stop)
             raise
@@ -814,7 +817,7 @@ class DrcController:
             except Exception:
                 self.metrics.inc("handler_exceptions_total", where="drc_pushes")
                 log.exception("DRC push failed")
-            await asyncio.sleep(min(1.0 / self.osd_hz, 1.0 / self.hsi_hz, 0.05))
+            await self.clock.sleep(min(1.0 / self.osd_hz, 1.0 / self.hsi_hz, 0.05))
 
     def _push(self, method: str, data: dict[str, Any] | None) -> None:
         if data is None:

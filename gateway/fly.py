@@ -13,6 +13,8 @@ delay) after the last repeat; Space zeroes every axis at once, ``x`` is an emerg
 values out) are sans-I/O and tested alone; :func:`cmd_fly` is the thin loop around them (termios, the
 broker link of :mod:`gateway.console`, rich). Knows nothing of devices: what the sticks do is the
 gateway's business (``drc.*`` settings, docs/drc.md).
+
+Time: reads the system clock itself (a separate process; the gateway's injected clock is the service's).
 """
 
 from __future__ import annotations

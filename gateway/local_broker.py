@@ -2,6 +2,9 @@
 
 Owns the mosquitto process, its config file and its readiness check. Knows nothing of the Cloud
 API. Never binds anything but loopback, and never reuses a broker someone else started.
+
+Time: real (``time.monotonic``/``time.sleep``): it waits for an operating-system process, not a timer of
+the gateway's.
 """
 
 from __future__ import annotations

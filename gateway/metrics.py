@@ -3,13 +3,15 @@
 Owns the numbers only (no HTTP, no Prometheus types) so every layer can count without a
 dependency; an exporter (``gateway.observability``) reads :meth:`Metrics.snapshot`. ``observe`` keeps
 a window of recent samples (for percentiles in benchmarks) and a cumulative histogram per label set
-(for Prometheus: buckets never forget, a window would). Updated from the event loop and, for a
-few counters, from library threads: ``+=`` on a dict entry under the GIL is enough for counters
-that only ever grow, and nothing reads them for control decisions.
+(for Prometheus: buckets never forget, a window would). Updated from the event loop and from other
+threads (paho's network threads, the motion writer, the link threads' callers), read from the web
+thread: one lock guards every update and every read (``d[k] += 1`` is a read and a write, and a dict
+that gains a key while another thread iterates it raises), held for a few dict operations only.
 """
 
 from __future__ import annotations
 
+import threading
 from collections import defaultdict, deque
 from dataclasses import dataclass, field
 
@@ -50,36 +52,45 @@ class Metrics:
     samples: dict[str, deque[float]] = field(default_factory=dict)
     histograms: dict[tuple[str, Labels], Histogram] = field(default_factory=dict)
     sample_window: int = 4096
+    lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
 
     def inc(self, name: str, amount: float = 1.0, **labels: object) -> None:
-        self.counters[(name, _labels(labels))] += amount
+        key = (name, _labels(labels))
+        with self.lock:
+            self.counters[key] += amount
 
     def set(self, name: str, value: float, **labels: object) -> None:
-        self.gauges[(name, _labels(labels))] = value
+        key = (name, _labels(labels))
+        with self.lock:
+            self.gauges[key] = value
 
     def observe(self, name: str, value: float, **labels: object) -> None:
-        window = self.samples.get(name)
-        if window is None:
-            window = self.samples[name] = deque(maxlen=self.sample_window)
-        window.append(value)
         key = (name, _labels(labels))
-        hist = self.histograms.get(key)
-        if hist is None:
-            hist = self.histograms[key] = Histogram()
-        hist.add(value)
+        with self.lock:
+            window = self.samples.get(name)
+            if window is None:
+                window = self.samples[name] = deque(maxlen=self.sample_window)
+            window.append(value)
+            hist = self.histograms.get(key)
+            if hist is None:
+                hist = self.histograms[key] = Histogram()
+            hist.add(value)
 
     def count(self, name: str, **labels: object) -> float:
         """Sum of a counter over every label set that includes ``labels``."""
         want = set(_labels(labels))
-        return sum(v for (n, lab), v in self.counters.items() if n == name and want <= set(lab))
+        with self.lock:
+            items = list(self.counters.items())
+        return sum(v for (n, lab), v in items if n == name and want <= set(lab))
 
     def gauge(self, name: str, **labels: object) -> float | None:
-        return self.gauges.get((name, _labels(labels)))
+        with self.lock:
+            return self.gauges.get((name, _labels(labels)))
 
     def snapshot(self) -> dict[str, object]:
+        with self.lock:
+            counters, gauges = list(self.counters.items()), list(self.gauges.items())
         return {
-            "counters": [
-                {"name": n, "labels": dict(lab), "value": v} for (n, lab), v in self.counters.items()
-            ],
-            "gauges": [{"name": n, "labels": dict(lab), "value": v} for (n, lab), v in self.gauges.items()],
+            "counters": [{"name": n, "labels": dict(lab), "value": v} for (n, lab), v in counters],
+            "gauges": [{"name": n, "labels": dict(lab), "value": v} for (n, lab), v in gauges],
         }

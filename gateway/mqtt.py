@@ -45,6 +45,7 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from gateway.broker_link import Loss, OfflineBuffer, ReconnectPolicy
+from gateway.clock import SYSTEM_CLOCK, Clock
 from gateway.metrics import Metrics
 from gateway.settings import BrokerEndpoint, BrokerSettings
 
@@ -196,7 +197,7 @@ class MqttBridge:
         inline: Callable[[str, bytes], bool] | None = None,
         on_disconnected: Callable[[str], None] | None = None,
         buffered: Callable[[str], bool] | None = None,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Clock = SYSTEM_CLOCK,
         rng: random.Random | None = None,
     ) -> None:
         self.settings = settings
@@ -216,7 +217,9 @@ class MqttBridge:
         self.on_disconnected: Callable[[str], None] | None = on_disconnected
         self._buffered = buffered  # QoS 0 topics kept in the offline buffer (osd); None: none
         self._name = name
-        self._clock = clock
+        # the gateway's clock, read by this bridge's threads; their waits are real (Event.wait): a
+        # supervisor on a ManualClock polls every 0.5 s until the clock is advanced
+        self._clock = clock.monotonic
         self.policy = ReconnectPolicy(
             len(self.endpoints),
             reconnect_min=settings.reconnect_min,

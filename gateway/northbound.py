@@ -319,7 +319,7 @@ class Northbound:
                 self.metrics.inc("handler_exceptions_total", where="northbound")
                 log.exception("periodic publishing failed")
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(stop.wait(), tick)
+                await self.clock.wait_for(stop.wait(), tick)
 
 
 def channel_index(i: int) -> str:

@@ -21,8 +21,7 @@ import concurrent.futures
 import importlib.metadata
 import logging
 import threading
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
@@ -37,6 +36,7 @@ from prometheus_client.core import (
 from prometheus_client.registry import Collector
 
 from adapters.base import LinkStats
+from gateway.clock import SYSTEM_CLOCK, Clock
 
 if TYPE_CHECKING:  # read through the app, never built here
     from gateway.drc import DrcController
@@ -163,11 +163,13 @@ class Observability:
     HTTP server that serves them. ``start()`` binds the port (failure is logged, never fatal: the
     bridge matters more than its metrics); ``stop()`` closes it."""
 
-    def __init__(self, app: Any, loop: Any = None, *, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, app: Any, loop: Any = None, *, clock: Clock = SYSTEM_CLOCK) -> None:
         self.app = app
         self.loop = loop
-        self._clock = clock
-        self._started_at = clock()
+        #: the gateway's clock (the web console keeps its sessions, uptime and timestamps on it too)
+        self.clock = clock
+        self._clock = clock.monotonic
+        self._started_at = self._clock()
         self.loop_deadline = LOOP_DEADLINE
         self._monotonic = _Monotonic()
         self.registry = CollectorRegistry(auto_describe=False)
@@ -228,6 +230,12 @@ class Observability:
                     "link": link,
                 }
             )
+        with metrics.lock:  # other threads count too (gateway/metrics.py)
+            counters, gauges = list(metrics.counters.items()), list(metrics.gauges.items())
+            histograms = [
+                (n, dict(lab), h.bounds, list(h.counts), h.total, h.count)
+                for (n, lab), h in metrics.histograms.items()
+            ]
         return {
             "gateway_sn": app.settings.gateway_sn,
             "version": VERSION,
@@ -247,12 +255,9 @@ class Observability:
             "requests_in_flight": int(getattr(dispatcher, "in_flight", 0)) if dispatcher is not None else 0,
             "devices": devices,
             "drc": self._drc(),
-            "counters": [(n, dict(lab), v) for (n, lab), v in list(metrics.counters.items())],
-            "gauges": [(n, dict(lab), v) for (n, lab), v in list(metrics.gauges.items())],
-            "histograms": [
-                (n, dict(lab), h.bounds, list(h.counts), h.total, h.count)
-                for (n, lab), h in list(metrics.histograms.items())
-            ],
+            "counters": [(n, dict(lab), v) for (n, lab), v in counters],
+            "gauges": [(n, dict(lab), v) for (n, lab), v in gauges],
+            "histograms": histograms,
         }
 
     def _drc(self) -> dict[str, Any]:

@@ -24,6 +24,7 @@ from adapters.rsdk.can import HOST_TX_ID, Reassembler
 from adapters.rsdk.commands import decode_message
 from adapters.rsdk.protocol import Frame
 from gateway.app import GatewayApp
+from gateway.clock import Clock
 from gateway.mqtt import close_client
 from gateway.settings import GatewaySettings, load_settings
 
@@ -182,9 +183,12 @@ class CloudClient:
 class GatewayThread:
     """The real gateway (GatewayApp) on its own event loop in a background thread."""
 
-    def __init__(self, settings: GatewaySettings, adapters: Sequence[Adapter] | None = None) -> None:
+    def __init__(
+        self, settings: GatewaySettings, adapters: Sequence[Adapter] | None = None, clock: Clock | None = None
+    ) -> None:
         self.settings = settings
         self._adapters = adapters
+        self._clock = clock
         self.app: GatewayApp | None = None
         self.loop: asyncio.AbstractEventLoop | None = None
         self._ready = threading.Event()
@@ -200,7 +204,7 @@ class GatewayThread:
 
     async def _run(self) -> None:
         self.loop = asyncio.get_running_loop()
-        self.app = GatewayApp(self.settings, adapters=self._adapters)
+        self.app = GatewayApp(self.settings, adapters=self._adapters, clock=self._clock)
         task = asyncio.create_task(self.app.run())
         await self.app.started.wait()
         self._ready.set()

@@ -22,7 +22,7 @@ import logging
 import struct
 import sys
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -36,6 +36,7 @@ from adapters.base import (
     InvalidParameters,
     TelemetrySink,
 )
+from adapters.clock import SYSTEM_CLOCK, Clock
 from adapters.config import DEVICE_MODEL_CONFIG, ProductSettings
 from adapters.families import Family
 from adapters.serial_link import LinkError, SerialLink
@@ -122,9 +123,9 @@ class VaneAdapter(SupervisedAdapter):
     _log = log
     _link: SerialLink | None
 
-    def __init__(self, settings: VaneSettings, *, now: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, settings: VaneSettings, *, clock: Clock = SYSTEM_CLOCK) -> None:
         self.settings = settings
-        super().__init__(DeviceInfo.of(settings.sn, settings.product), settings, now)
+        super().__init__(DeviceInfo.of(settings.sn, settings.product), settings, clock)
         self.deadline = settings.request_timeout + 0.2
         self._decoder: StreamDecoder[VaneFrame] = StreamDecoder(VaneRules())
         self._seq = 0
@@ -181,7 +182,7 @@ class VaneAdapter(SupervisedAdapter):
         self._waiting[seq] = waiter
         try:
             self._link.write(encode(POINT, seq, struct.pack("<H", round(data.heading * 10) % 3600)))
-            reply = await asyncio.wait_for(waiter, self.settings.request_timeout)
+            reply = await self._clock.wait_for(waiter, self.settings.request_timeout)
         except TimeoutError:
             raise DeviceTimeout(f"vane {self.info.sn} did not answer") from None
         finally:

@@ -37,7 +37,6 @@ import asyncio
 import contextlib
 import logging
 import math
-import time
 from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -53,6 +52,7 @@ from adapters.base import (
     InvalidParameters,
     TelemetrySink,
 )
+from adapters.clock import SYSTEM_CLOCK, Clock
 from adapters.osdk import commands as cmds
 from adapters.osdk.config import DEFAULT_FREQUENCIES, OsdkDeviceSettings
 from adapters.osdk.extensions import (
@@ -176,12 +176,12 @@ class AircraftAdapter(SupervisedAdapter):
     _log = log
     _link: SerialLink | None
 
-    def __init__(self, settings: OsdkDeviceSettings, *, now: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, settings: OsdkDeviceSettings, *, clock: Clock = SYSTEM_CLOCK) -> None:
         self.settings = settings
         self.fw = settings.firmware
         self.codes = cmds.FIRMWARE_CODES[self.fw]  # task codes, ACKs and status values of this firmware
         self._task_seq = 0  # M100 flight tasks carry a command sequence number
-        super().__init__(DeviceInfo.of(settings.sn, settings.product), settings, now)
+        super().__init__(DeviceInfo.of(settings.sn, settings.product), settings, clock)
         self.deadline = settings.deadline
         self._decoder = Decoder()
         # each command waiting for its ACK is tagged with its waiter: the future and the command's name
@@ -233,6 +233,7 @@ class AircraftAdapter(SupervisedAdapter):
             await self.stop_motion()
         if self.settings.release_on_stop and self.has_control and self._link is not None and self._link.up:
             with contextlib.suppress(Exception):
+                # real time: a stopping gateway stops even when nobody advances a test's clock
                 await asyncio.wait_for(self.command("obtain_control", {"control": 0}), 1.0)
         await self._end_supervision(self._mission_task)
         self._fail_pending(DeviceNotConnected(f"aircraft {self.info.sn} adapter stopped"))
@@ -377,7 +378,7 @@ class AircraftAdapter(SupervisedAdapter):
                 fut, name = p.tag
                 if not fut.done():
                     fut.set_exception(DeviceTimeout(f"aircraft {self.info.sn} did not acknowledge {name}"))
-            await asyncio.sleep(0.02)
+            await self._clock.sleep(0.02)
 
     def _on_link_down(self, reason: str) -> None:
         super()._on_link_down(reason)
@@ -634,7 +635,7 @@ class AircraftAdapter(SupervisedAdapter):
             msg = await self.command("obtain_control", {"control": control})
             code = int(msg.fields["ack"])
             if code in CONTROL_IN_PROGRESS:
-                await asyncio.sleep(0.1)
+                await self._clock.sleep(0.1)
                 continue  # the FC wants the request again, with a new seq
             if code == (CONTROL_OBTAINED if control else CONTROL_RELEASED):
                 self.has_control = bool(control)
@@ -737,7 +738,7 @@ class AircraftAdapter(SupervisedAdapter):
             # within the interval is not re-sent (need_reply 0); the events of a point, the end, a
             # cancel or a failure still ask for a reply
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(task.done.wait(), PROGRESS_INTERVAL)
+                await self._clock.wait_for(task.done.wait(), PROGRESS_INTERVAL)
             if not task.done.is_set() and not task.finished:
                 self._progress(task, "wayline_progress", task.reached - task.offset, need_reply=False)
         await task.done.wait()
@@ -916,7 +917,7 @@ class AircraftAdapter(SupervisedAdapter):
             if self._now() > deadline:
                 self._progress(task, "wayline_failed", 0, ResultCode.DEVICE_TIMEOUT)
                 return
-            await asyncio.sleep(0.1)
+            await self._clock.sleep(0.1)
         try:
             points = self._takeoff_route(data)
             task.points = len(points)

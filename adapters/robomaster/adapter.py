@@ -50,8 +50,7 @@ import asyncio
 import contextlib
 import logging
 import math
-import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 from adapters.base import (
@@ -62,6 +61,7 @@ from adapters.base import (
     InvalidParameters,
     TelemetrySink,
 )
+from adapters.clock import SYSTEM_CLOCK, Clock
 from adapters.robomaster.commands import (
     ControlChannel,
     MessageError,
@@ -112,11 +112,11 @@ class RobotAdapter(SupervisedAdapter):
     _log = log
     _link: SerialLink | None
 
-    def __init__(
-        self, settings: RobomasterDeviceSettings, *, now: Callable[[], float] = time.monotonic
-    ) -> None:
+    def __init__(self, settings: RobomasterDeviceSettings, *, clock: Clock = SYSTEM_CLOCK) -> None:
         self.settings = settings
-        super().__init__(DeviceInfo.of(settings.sn, settings.product, settings.payload_index), settings, now)
+        super().__init__(
+            DeviceInfo.of(settings.sn, settings.product, settings.payload_index), settings, clock
+        )
         self._control: ControlChannel = settings.control.channel()
         self._decoder = Decoder(settings.max_data_len)
         self._seq = 0
@@ -371,7 +371,7 @@ class RobotAdapter(SupervisedAdapter):
                 left = self._velocity_until - self._now()
                 if left <= 0:
                     break
-                await asyncio.sleep(min(period, left))
+                await self._clock.sleep(min(period, left))
                 if self._now() >= self._velocity_until:
                     break
                 vx, vy, wz = self.velocity
@@ -499,7 +499,7 @@ class RobotAdapter(SupervisedAdapter):
         last = self._now()
         try:
             while self._now() < self._drag_until:
-                await asyncio.sleep(min(period, max(0.0, self._drag_until - self._now())))
+                await self._clock.sleep(min(period, max(0.0, self._drag_until - self._now())))
                 now = self._now()
                 with contextlib.suppress(DeviceNotConnected):
                     self._drag_step(min(now, self._drag_until) - last)

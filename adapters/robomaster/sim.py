@@ -21,6 +21,9 @@ Two sans-I/O models (a clock value in, frames out; nothing here sleeps or reads 
 Conventions of the simulated field (RMUC, 28 m × 15 m): x east, y north, heading CCW from +x.
 The referee's 0x0203 ``angle`` is a compass bearing in degrees (north = 0, clockwise), so the
 robot starts at (2, 7.5) facing east: angle 90.
+
+Time: a simulator keeps its own, real time (``time.monotonic``), as the device it stands for does; the
+gateway's injected clock is not the device's.
 """
 
 from __future__ import annotations

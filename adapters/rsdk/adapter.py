@@ -37,8 +37,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -53,6 +52,7 @@ from adapters.base import (
     MethodNotSupported,
     TelemetrySink,
 )
+from adapters.clock import SYSTEM_CLOCK, Clock
 from adapters.rsdk.can import Reassembler, segment
 from adapters.rsdk.commands import (
     TABLE,
@@ -129,9 +129,11 @@ class GimbalAdapter(SupervisedAdapter):
     _log = log
     _link: CanLink | None
 
-    def __init__(self, settings: RsdkDeviceSettings, *, now: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, settings: RsdkDeviceSettings, *, clock: Clock = SYSTEM_CLOCK) -> None:
         self.settings = settings
-        super().__init__(DeviceInfo.of(settings.sn, settings.product, settings.payload_index), settings, now)
+        super().__init__(
+            DeviceInfo.of(settings.sn, settings.product, settings.payload_index), settings, clock
+        )
         self._rx = Reassembler(rx_id=settings.rx_id)
         self._seq = 0
         self._pending: dict[int, _Pending] = {}
@@ -377,7 +379,7 @@ class GimbalAdapter(SupervisedAdapter):
         self._pending[frame.seq] = _Pending(fut, spec.cmd_set, spec.cmd_id, name)
         try:
             self._link.send(segment(encode(frame), self.settings.tx_id))
-            return await asyncio.wait_for(fut, self.settings.request_timeout)
+            return await self._clock.wait_for(fut, self.settings.request_timeout)
         except LinkError as exc:
             raise DeviceNotConnected(str(exc)) from None
         except TimeoutError:
@@ -404,7 +406,7 @@ class GimbalAdapter(SupervisedAdapter):
 
         try:
             self._link.send(segment(encode(frame), self.settings.tx_id), on_sent=sent)
-            await asyncio.wait_for(done, self.settings.request_timeout)
+            await self._clock.wait_for(done, self.settings.request_timeout)
         except LinkError as exc:
             raise DeviceNotConnected(str(exc)) from None
         except TimeoutError:
@@ -487,7 +489,7 @@ class GimbalAdapter(SupervisedAdapter):
         period = 1.0 / self.settings.drag_rate_hz
         try:
             while self._now() < self._drag_until:
-                await asyncio.sleep(min(period, max(0.0, self._drag_until - self._now())))
+                await self._clock.sleep(min(period, max(0.0, self._drag_until - self._now())))
                 if self._now() >= self._drag_until:
                     break
                 with contextlib.suppress(LinkError, CommandError):

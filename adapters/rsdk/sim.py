@@ -11,6 +11,9 @@ Layers: :class:`GimbalModel` is sans-I/O (frames and a clock value in, frames ou
 :class:`GimbalNode` adds CAN segmentation/reassembly; the runners give it a real bus: a python-can
 bus (``virtual`` in-process) or an SLCAN USB-CAN adapter on a pty or loopback TCP port, which the
 gateway opens with python-can's own ``slcan`` interface as it would a CANable.
+
+Time: a simulator keeps its own, real time (``time.monotonic``), as the device it stands for does; the
+gateway's injected clock is not the device's.
 """
 
 from __future__ import annotations

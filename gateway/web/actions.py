@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import time
 import uuid
 from typing import Any
 
@@ -91,7 +90,7 @@ def catalogue(app: Any) -> dict[str, Any]:
                 "enable_tls": broker.tls,
                 "client_id": f"drc-console-{app.settings.gateway_sn}",
                 "username": "console",
-                "expire_time": int(time.time()) + 3600,
+                "expire_time": app.clock.time_ms() // 1000 + 3600,
             },
             "osd_frequency": 10,
             "hsi_frequency": 1,
@@ -120,7 +119,7 @@ async def run_action(app: Any, method: str, data: Any) -> dict[str, Any]:
     body = {
         "tid": tid,
         "bid": str(uuid.uuid4()),
-        "timestamp": int(time.time() * 1000),
+        "timestamp": app.clock.time_ms(),
         "method": method,
         "data": data,
     }

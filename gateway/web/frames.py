@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import itertools
 import threading
-import time
 from collections import deque
 from collections.abc import Iterable, Mapping
 from types import ModuleType
@@ -33,6 +32,7 @@ from typing import Any
 
 from adapters import families
 from adapters.wire.stream import BadFrame, FrameRules, StreamDecoder
+from gateway.clock import SYSTEM_CLOCK, Clock
 from gateway.codec_cli import json_safe
 
 __all__ = ["FrameTap", "LinkInspector", "Record", "inspectable"]
@@ -54,14 +54,15 @@ def inspectable(family: str) -> ModuleType | None:
 class FrameTap:
     """A link's observer: ``tap(direction, can_id, data)`` from any thread keeps the last ``keep`` records."""
 
-    __slots__ = ("_count", "records")
+    __slots__ = ("_clock", "_count", "records")
 
-    def __init__(self, keep: int) -> None:
+    def __init__(self, keep: int, clock: Clock = SYSTEM_CLOCK) -> None:
         self.records: deque[Record] = deque(maxlen=keep)
         self._count = itertools.count()
+        self._clock = clock  # read from the link's threads: a clock's reads are thread-safe
 
     def __call__(self, direction: str, can_id: int | None, data: bytes) -> None:
-        self.records.append((next(self._count), time.time(), direction, can_id, data))
+        self.records.append((next(self._count), self._clock.time_ms() / 1000, direction, can_id, data))
 
     def snapshot(self) -> tuple[Record, ...]:
         """The records now held, oldest first (a copy: the link's threads keep appending)."""
@@ -93,14 +94,21 @@ class LinkInspector:
     """One device link as the inspector shows it (``kind`` "can" or "serial")."""
 
     def __init__(
-        self, *, family: str, kind: str, where: str, keep: int, options: Mapping[str, Any] | None = None
+        self,
+        *,
+        family: str,
+        kind: str,
+        where: str,
+        keep: int,
+        options: Mapping[str, Any] | None = None,
+        clock: Clock = SYSTEM_CLOCK,
     ) -> None:
         describe = inspectable(family)
         if describe is None:
             raise ValueError(f"no frame inspector for family {family!r}")
         self.family, self.kind, self.where = family, kind, where
         self.options = dict(options or {})
-        self.tap = FrameTap(keep)
+        self.tap = FrameTap(keep, clock)
         self.frames: deque[dict[str, Any]] = deque(maxlen=keep)
         self.gaps = 0  # times records were lost before they were read (the streams restarted)
         self.skipped = 0  # records a live view skipped to catch up with a flood (the downloads keep them)

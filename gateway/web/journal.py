@@ -19,9 +19,10 @@ from __future__ import annotations
 import itertools
 import json
 import threading
-import time
 from collections import deque
 from typing import Any
+
+from gateway.clock import SYSTEM_CLOCK, Clock
 
 __all__ = ["MAX_BODY", "Journal", "redact"]
 
@@ -66,7 +67,8 @@ def _kind(topic_name: str) -> str | None:
 
 
 class Journal:
-    def __init__(self, keep: int = 300) -> None:
+    def __init__(self, keep: int = 300, clock: Clock = SYSTEM_CLOCK) -> None:
+        self._clock = clock
         self.entries: deque[dict[str, Any]] = deque(maxlen=keep)
         self._raw: deque[tuple[str, str, bytes]] = deque(maxlen=4 * keep)  # fed, not yet parsed
         self._numbers = itertools.count(1)
@@ -134,7 +136,12 @@ class Journal:
             elif kind == "services_reply" and tid in self._requests:
                 asked, body = self._requests.pop(tid)
                 if result == 0:
-                    self.mission = {"method": asked, "data": body, "progress": None, "since": time.time()}
+                    self.mission = {
+                        "method": asked,
+                        "data": body,
+                        "progress": None,
+                        "since": self._now(),
+                    }
         elif (
             method.endswith("_point_progress")
             and kind == "events"
@@ -146,12 +153,20 @@ class Journal:
     def track_local(self, method: str, data: dict[str, Any], result: int) -> None:
         """A fly-to / take-off the console itself asked for (its reply never crosses the broker)."""
         if method in _TRACKED and result == 0:
-            self.mission = {"method": method, "data": redact(data), "progress": None, "since": time.time()}
+            self.mission = {
+                "method": method,
+                "data": redact(data),
+                "progress": None,
+                "since": self._now(),
+            }
+
+    def _now(self) -> float:
+        return self._clock.time_ms() / 1000  # wall clock, seconds
 
     def _add(self, entry: dict[str, Any]) -> None:
         with self._lock:
             entry["n"] = next(self._numbers)
-            entry["t"] = round(time.time(), 3)
+            entry["t"] = round(self._now(), 3)
             self.entries.append(entry)
 
     # -- reading (any thread) ---------------------------------------------------------------------------

@@ -16,6 +16,9 @@ Every action and every refusal is written to the audit log (``gateway.audit``) w
 result, and noted in the journal. Security rules: :mod:`gateway.web.security`.
 
 Must not know device protocols, Cloud API methods (``actions`` does) or Prometheus (``observability``).
+
+Time: the web thread's own loop paces pages, pauses and the sign-in delay in real time (browsers see
+it); the gateway's clock (``Observability.clock``) keeps the console's sessions, uptime and timestamps.
 """
 
 from __future__ import annotations
@@ -120,7 +123,9 @@ class WebServer:
         self.app = observability.app
         self.console = console
         self.gateway_loop = gateway_loop
-        self.state = ConsoleState(self.app, frames=console.frames, journal=console.journal)
+        self.state = ConsoleState(
+            self.app, frames=console.frames, journal=console.journal, clock=observability.clock
+        )
         self.guard: Guard | None = None
         self.port: int | None = None
         self.loop: asyncio.AbstractEventLoop | None = None
@@ -133,7 +138,7 @@ class WebServer:
 
     # -- life cycle (the caller's thread) -------------------------------------------------------------
     def start(self, host: str, port: int) -> WebServer | None:
-        self.guard = Guard(self.console, host)
+        self.guard = Guard(self.console, host, now=self.obs.clock.monotonic)
         if self.console.enabled:
             self.state.attach()  # on the gateway's loop (start() is called from it): journal and taps
         ready = threading.Event()
@@ -572,6 +577,8 @@ class WebServer:
                     await asyncio.wait_for(self._has_pages.wait(), 1.0)
                 self.state.journal.digest()
                 continue
+            # the web thread's own loop paces pages in real time (browsers see it); the gateway's clock
+            # is not this loop's timer: a ManualClock would freeze every page
             started = loop.time()
             try:
                 await self._tick()

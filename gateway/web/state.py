@@ -16,13 +16,12 @@ know HTTP or the page.
 from __future__ import annotations
 
 import math
-import time
 from collections import deque
-from collections.abc import Callable
 from dataclasses import asdict
 from typing import Any
 
 from adapters.base import Adapter
+from gateway.clock import SYSTEM_CLOCK, Clock
 from gateway.observability import VERSION, safe_url
 from gateway.web.frames import LinkInspector, inspectable
 from gateway.web.journal import Journal
@@ -48,14 +47,13 @@ def _distance_m(a: tuple[float, float], b: tuple[float, float]) -> float:
 class ConsoleState:
     """The console's view of one :class:`gateway.app.GatewayApp`."""
 
-    def __init__(
-        self, app: Any, *, frames: int, journal: int, clock: Callable[[], float] = time.monotonic
-    ) -> None:
+    def __init__(self, app: Any, *, frames: int, journal: int, clock: Clock = SYSTEM_CLOCK) -> None:
         self.app = app
-        self.journal = Journal(journal)
+        self.journal = Journal(journal, clock=clock)
         self._keep_frames = frames
-        self._clock = clock
-        self._started = clock()
+        self._wall = clock
+        self._clock = clock.monotonic
+        self._started = self._clock()
         self.inspectors: dict[str, LinkInspector] = {}
         self.tracks: dict[str, deque[tuple[float, float]]] = {}
         self.home: dict[str, tuple[float, float]] = {}
@@ -81,6 +79,7 @@ class ConsoleState:
                 return None
             options_for = getattr(describe, "options_for", None)
             inspector = LinkInspector(
+                clock=self._wall,
                 family=family,
                 kind=stats.kind,
                 where=stats.where,
@@ -110,7 +109,7 @@ class ConsoleState:
             "devices": devices,
             "drc": self._drc(drc),
             "mission": self.journal.mission,
-            "t": round(time.time() * 1000),
+            "t": self._wall.time_ms(),
         }
 
     def _device(self, adapter: Adapter, auth: Any, now: float) -> dict[str, Any]:
