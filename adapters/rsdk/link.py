@@ -1,15 +1,21 @@
 """The CAN link of one gimbal: binds the R SDK codec to a python-can bus, thinly.
 
-Owns the ``can.Bus`` (any interface python-can opens: socketcan, slcan, pcan, virtual …), its
-notifier thread and a sender thread. Received CAN frames on the gimbal's id are handed to the
-asyncio loop with ``call_soon_threadsafe``; sends go through a queue so a slow or stuck adapter
-never blocks the loop. python-can exceptions become :class:`LinkError`, and a bus that fails
-(unplugged adapter, closed pty, refused socket) is reported once through ``on_down``.
+Owns the ``can.Bus`` (any interface python-can opens: socketcan, slcan, pcan, virtual …), its reader and,
+where a send may block, a sender thread. How frames come in depends on the interface (:data:`LOOP_READ`):
+where the bus has a file descriptor the loop can watch, the loop reads it itself (``add_reader``, then
+``bus.recv(0)`` until empty: no thread hand-off); everywhere else python-can's notifier thread reads and
+hands frames to the loop with ``call_soon_threadsafe``. How frames go out depends on the interface
+(:data:`NONBLOCKING_SEND`): where ``bus.send`` cannot block (python-can's ``virtual`` bus), the caller's
+thread (the loop, the motion writer) puts them on the bus itself, under a lock that keeps one command's
+frames together: no thread hand-off on the way to the device. Everywhere else they go through a queue to
+the sender thread, so a slow or stuck adapter never blocks the loop. python-can exceptions become
+:class:`LinkError`, and a bus that fails (unplugged adapter, closed pty, refused socket) is reported once
+through ``on_down``.
 
 ``observer`` (None by default) sees every CAN frame this link receives on the gimbal's id and every one
-it puts on the bus, as ``observer("rx" | "tx", arb_id, data)`` from the notifier or sender thread: a
-frame tap (the web console's frame inspector) that must be thread-safe, bounded and quick, and whose
-failure never touches the link.
+it puts on the bus, as ``observer("rx" | "tx", arb_id, data)`` from the notifier thread, the sender
+thread or the sending caller's thread: a frame tap (the web console's frame inspector) that must be
+thread-safe, bounded and quick, and whose failure never touches the link.
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import queue
 import threading
 from collections.abc import Callable
@@ -26,7 +33,81 @@ import can
 
 log = logging.getLogger(__name__)
 
-__all__ = ["CanLink", "LinkError"]
+__all__ = ["NONBLOCKING_SEND", "CanLink", "LinkError"]
+
+#: Interfaces whose ``bus.send(msg, timeout=0)`` returns at once, so frames go on the bus from the
+#: sender's own thread with no hand-off. python-can's ``virtual`` bus puts a copy of each frame into every
+#: receiver's queue (unbounded unless a receiver was opened with ``rx_queue_size``; a full one fails the
+#: send at once with ``timeout=0``, as a full transmit queue fails the link today). Not listed, and so
+#: sent by the sender thread: socketcan (a full socket buffer blocks), slcan and serial adapters (a write
+#: to a stalled port blocks), vendor drivers (pcan, kvaser …: their calls may wait on the hardware).
+NONBLOCKING_SEND = frozenset({"virtual"})
+
+
+def _own_fileno(bus: can.BusABC) -> tuple[int, Callable[[], None]] | None:
+    """The bus's own descriptor (socketcan: its raw CAN socket; python-can's ``Notifier(loop=)`` watches
+    the same one). Nothing to undo."""
+    return bus.fileno(), lambda: None
+
+
+class _SignalledQueue(queue.Queue[Any]):
+    """A virtual bus's receive queue that also writes one byte to a pipe per frame put in it (from the
+    sending thread), so the loop can watch the pipe as it watches a socket."""
+
+    def __init__(self, wfd: int) -> None:
+        super().__init__()
+        self._wfd = wfd
+
+    def put(self, item: Any, block: bool = True, timeout: float | None = None) -> None:
+        super().put(item, block, timeout)
+        with contextlib.suppress(BlockingIOError, OSError):  # full: the loop is already due to read
+            os.write(self._wfd, b"\0")
+
+
+def _virtual_fileno(bus: can.BusABC) -> tuple[int, Callable[[], None]] | None:
+    """python-can's ``virtual`` bus has no descriptor: its frames arrive in a ``queue.Queue`` that every
+    sender on the channel puts into (``bus.queue``, listed in ``bus.channel``). Swap it, under the
+    module's ``channels_lock``, for a :class:`_SignalledQueue` tied to a pipe; the loop watches the pipe.
+    None (the notifier thread reads instead) when a python-can version lays the bus out differently."""
+    from can.interfaces import virtual
+
+    old, channel = getattr(bus, "queue", None), getattr(bus, "channel", None)
+    lock = getattr(virtual, "channels_lock", None)
+    if not isinstance(old, queue.Queue) or not isinstance(channel, list) or lock is None:
+        return None
+    rfd, wfd = os.pipe()
+    os.set_blocking(rfd, False)
+    os.set_blocking(wfd, False)
+    new = _SignalledQueue(wfd)
+    with lock:
+        index = next((i for i, q in enumerate(channel) if q is old), None)
+        if index is None:
+            os.close(rfd)
+            os.close(wfd)
+            return None
+        channel[index] = new
+        bus.queue = new  # type: ignore[attr-defined]  # python-can's VirtualBus attribute
+    while True:  # frames that arrived before the swap
+        try:
+            new.put_nowait(old.get_nowait())
+        except queue.Empty:
+            break
+
+    def undo() -> None:
+        for fd in (rfd, wfd):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+    return rfd, undo
+
+
+#: Interfaces the loop reads itself (``add_reader`` on a descriptor, then ``bus.recv(0)`` until empty),
+#: and how to get their descriptor; every other interface is read by python-can's notifier thread
+#: (slcan and serial adapters buffer partial lines behind their descriptor; vendor drivers have none).
+LOOP_READ: dict[str, Callable[[can.BusABC], tuple[int, Callable[[], None]] | None]] = {
+    "socketcan": _own_fileno,
+    "virtual": _virtual_fileno,
+}
 
 
 class LinkError(Exception):
@@ -38,13 +119,8 @@ class _Listener(can.Listener):
         self._link = link
 
     def on_message_received(self, msg: can.Message) -> None:
-        if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
-            return
-        if msg.arbitration_id != self._link.rx_id:
-            return
-        self._link.frames_in += 1
-        self._link._observe("rx", msg.arbitration_id, msg.data)
-        self._link._from_thread(self._link.on_frame, msg.arbitration_id, bytes(msg.data))
+        if self._link._accept(msg):
+            self._link._from_thread(self._link.on_frame, msg.arbitration_id, bytes(msg.data))
 
     def on_error(self, exc: Exception) -> None:
         self._link._from_thread(self._link._failed, f"receive failed: {type(exc).__name__}: {exc}")
@@ -80,8 +156,12 @@ class CanLink:
         self._loop = loop
         self._bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
+        #: the descriptor the loop watches and what undoes it (None: the notifier thread reads)
+        self._reader: tuple[int, Callable[[], None]] | None = None
         self._sendq: queue.SimpleQueue[can.Message | _Sent | None] = queue.SimpleQueue()
         self._sender: threading.Thread | None = None
+        self._direct = interface in NONBLOCKING_SEND  # sent by the caller's thread (see NONBLOCKING_SEND)
+        self._send_lock = threading.Lock()  # a direct send: one command's frames together, in order
         self._up = False
         self.frames_in = 0  # CAN frames on rx_id
         self.frames_out = 0
@@ -118,10 +198,20 @@ class CanLink:
         except (can.CanError, OSError, ValueError, ImportError) as exc:
             raise LinkError(f"cannot open {self.interface} {self.channel}: {exc}") from None
         self._bus = bus
-        self._notifier = can.Notifier(bus, [_Listener(self)], timeout=0.05)
+        self._reader = None
+        watch = LOOP_READ.get(self.interface)
+        try:
+            self._reader = watch(bus) if watch is not None else None
+        except (NotImplementedError, OSError, ValueError):
+            self._reader = None
+        if self._reader is not None:
+            self._loop.add_reader(self._reader[0], self._readable, bus)
+        else:
+            self._notifier = can.Notifier(bus, [_Listener(self)], timeout=0.05)
         self._sendq = queue.SimpleQueue()
-        self._sender = threading.Thread(target=self._send_loop, args=(bus, self._sendq), daemon=True)
-        self._sender.start()
+        if not self._direct:
+            self._sender = threading.Thread(target=self._send_loop, args=(bus, self._sendq), daemon=True)
+            self._sender.start()
         self._up = True
         self.opens += 1
         log.info("CAN link open: %s %s", self.interface, self.channel)
@@ -138,6 +228,9 @@ class CanLink:
         loop once the last of them is on the bus (never, if the bus fails first)."""
         if not self._up:
             raise LinkError("CAN link is down")
+        if self._direct:
+            self._send_now(frames, on_sent)
+            return
         for arb_id, data in frames:
             self._sendq.put(can.Message(arbitration_id=arb_id, data=data, is_extended_id=False))
         if on_sent is not None:
@@ -145,6 +238,12 @@ class CanLink:
 
     def close(self) -> None:
         self._up = False
+        if self._reader is not None:
+            fd, undo = self._reader
+            self._reader = None
+            with contextlib.suppress(Exception):
+                self._loop.remove_reader(fd)
+            undo()
         if self._notifier is not None:
             with contextlib.suppress(Exception):
                 self._notifier.stop(timeout=1.0)
@@ -163,6 +262,55 @@ class CanLink:
                 with contextlib.suppress(Exception):
                     port.close()
             self._bus = None
+
+    def _send_now(self, frames: list[tuple[int, bytes]], on_sent: Callable[[], None] | None) -> None:
+        """Put the frames on a bus whose send cannot block, from the calling thread (any thread)."""
+        bus = self._bus
+        with self._send_lock:
+            for arb_id, data in frames:
+                msg = can.Message(arbitration_id=arb_id, data=data, is_extended_id=False)
+                try:
+                    if bus is None:
+                        raise can.CanOperationError("bus closed")
+                    bus.send(msg, timeout=0)
+                except (can.CanError, OSError, ValueError) as exc:
+                    if self._up:  # (a link closed under a sender is not a send error)
+                        self.send_errors += 1
+                        self._from_thread(self._failed, f"send failed: {type(exc).__name__}: {exc}")
+                    return
+                self.frames_out += 1
+                self._observe("tx", arb_id, data)
+        if on_sent is not None:
+            self._from_thread(on_sent)
+
+    def _accept(self, msg: can.Message) -> bool:
+        """A data frame on the gimbal's id (counted and shown to the tap); anything else is not ours."""
+        if (
+            msg.is_error_frame
+            or msg.is_remote_frame
+            or msg.is_extended_id
+            or msg.arbitration_id != self.rx_id
+        ):
+            return False
+        self.frames_in += 1
+        self._observe("rx", msg.arbitration_id, msg.data)
+        return True
+
+    def _readable(self, bus: can.BusABC) -> None:
+        """In the loop: the bus's descriptor is readable; take every frame waiting (one wake-up may stand
+        for several) and hand ours to ``on_frame`` directly."""
+        reader = self._reader
+        if reader is None:
+            return
+        if self.interface == "virtual":
+            with contextlib.suppress(BlockingIOError, OSError):
+                os.read(reader[0], 4096)  # the pipe's bytes first: a frame put after this wakes us again
+        try:
+            while self._reader is not None and (msg := bus.recv(0)) is not None:
+                if self._accept(msg):
+                    self.on_frame(msg.arbitration_id, bytes(msg.data))
+        except (can.CanError, OSError, ValueError) as exc:
+            self._failed(f"receive failed: {type(exc).__name__}: {exc}")
 
     # -- threads ----------------------------------------------------------------------------------
     def _send_loop(self, bus: can.BusABC, q: queue.SimpleQueue[can.Message | _Sent | None]) -> None:
