@@ -147,7 +147,8 @@ def run(cfg: Config) -> list[Row]:
     note_echo = "baseline: cloud paho → mosquitto → echo client → mosquitto → cloud paho (QoS 1)"
     notes = {
         "x_rsdk_version_get": "cloud → mosquitto → gateway → CAN (python-can virtual) → simulated gimbal → "
-        "gateway → mosquitto → cloud; includes the simulated CAN round trip (3 thread hand-offs)",
+        "gateway → mosquitto → cloud; includes the simulated CAN round trip (loop → simulated gimbal's "
+        "thread → loop: the loop writes the virtual bus and reads it with add_reader)",
         "payload_authority_grab": "validated, routed and answered by the gateway without a device frame: "
         "the gateway's own cost",
     }
