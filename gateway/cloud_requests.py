@@ -67,7 +67,7 @@ class CloudRequests:
                 self.outbox.publish(topic(TopicKind.REQUESTS, self.gateway_sn), raw, qos=1)
                 self.metrics.inc("requests_published_total", method=method)
                 try:
-                    return await asyncio.wait_for(asyncio.shield(fut), timeout)
+                    return await self.clock.wait_for(asyncio.shield(fut), timeout)
                 except TimeoutError:
                     continue
             self.metrics.inc("requests_unanswered_total", method=method)

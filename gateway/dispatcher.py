@@ -319,7 +319,7 @@ class Dispatcher:
                 return await (self.drc.enter(data) if method == "drc_mode_enter" else self.drc.exit())
             if self.wayline is not None and method in self.wayline.methods:
                 try:
-                    return await asyncio.wait_for(self.wayline.call(method, data), MAX_DEADLINE)
+                    return await self.clock.wait_for(self.wayline.call(method, data), MAX_DEADLINE)
                 except TimeoutError:
                     return ResultCode.DEVICE_TIMEOUT, {"reason": f"{method} did not finish in time"}
             adapter, problem = self._route(method, data)

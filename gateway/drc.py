@@ -424,7 +424,7 @@ class DrcController:
         """Gateway stop: motion zeroed, session ended, every link closed, the writer's last frame out."""
         self._feed(ds.Shutdown(self.now()))
         for _ in range(3):  # closes may be scheduled by the actions just carried out
-            await asyncio.sleep(0)
+            await asyncio.sleep(0)  # a yield, not a timer
             pending = [*self._opening.values(), *self._closing]
             if pending:
                 await asyncio.gather(*pending, return_exceptions=True)

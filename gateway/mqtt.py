@@ -155,7 +155,7 @@ class _Prober:
         self._pending = keep
         if not keep:
             if timeout > 0:
-                time.sleep(timeout)
+                time.sleep(timeout)  # the supervisor thread's real wait (see the bridge's clock note)
             return answered
         try:
             _, writable, _ = select.select([], [s for _, _, s in keep], [], timeout)
@@ -220,6 +220,7 @@ class MqttBridge:
         # the gateway's clock, read by this bridge's threads; their waits are real (Event.wait): a
         # supervisor on a ManualClock polls every 0.5 s until the clock is advanced
         self._clock = clock.monotonic
+        self.clock = clock
         self.policy = ReconnectPolicy(
             len(self.endpoints),
             reconnect_min=settings.reconnect_min,
@@ -307,7 +308,10 @@ class MqttBridge:
 
     async def wait_connected(self, timeout: float | None = None) -> bool:
         try:
-            await asyncio.wait_for(self._connected.wait(), timeout)
+            if timeout is None:
+                await self._connected.wait()
+            else:
+                await self.clock.wait_for(self._connected.wait(), timeout)
         except TimeoutError:
             return False
         return True

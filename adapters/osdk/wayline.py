@@ -95,7 +95,7 @@ class OsdkWayline:
         while not self._took_off():
             if a._now() > deadline:
                 raise DeviceTimeout("the aircraft did not take off in time")
-            await asyncio.sleep(POLL)
+            await a._clock.sleep(POLL)
 
     def _took_off(self) -> bool:
         """Airborne, at least 1 m up, and the FC's own take-off over (display mode no longer 11)."""
@@ -143,7 +143,7 @@ class OsdkWayline:
                     # the FC flies its uploaded mission on its own (a ground-station mission needs no
                     # host), but nothing it does can be reported or changed any more: the task fails
                     raise DeviceNotConnected(f"aircraft {self.adapter.info.sn} lost during the mission")
-                await asyncio.sleep(POLL)
+                await self.adapter._clock.sleep(POLL)
             if task.failed is not None:
                 raise DeviceRejected(task.failed, "the flight controller reported a mission error")
             if task.reached < len(mission.waypoints) - 1:

@@ -5,6 +5,7 @@ fills in what a cloud would (``file.url``, ``file.fingerprint`` = lowercase MD5,
 Owns a one-file HTTP server on 127.0.0.1 (a thread of the console process, never of the gateway) that
 lives until the prepare is answered: the gateway downloads the file during the prepare. Knows nothing
 of MQTT. ``dji-gateway route-demo PATH`` writes the KMZ of the README's "fly a route" walkthrough.
+Time: the console's own (the system clock): a process of its own, not the gateway's injected clock.
 """
 
 from __future__ import annotations

@@ -503,7 +503,7 @@ class WaylineService:
                 self.metrics.inc("handler_exceptions_total", where="wayline")
                 log.exception("wayline tick failed")
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(stop.wait(), PROGRESS_PERIOD)
+                await self.clock.wait_for(stop.wait(), PROGRESS_PERIOD)
 
     async def stop(self) -> None:
         for run in list(self._runs.values()):
