@@ -46,20 +46,21 @@ def test_virtual_is_read_by_the_loop_and_written_by_the_sender() -> None:
             new = {t for t in set(threading.enumerate()) - before if not t.name.startswith("asyncio_")}
             assert new == set()
 
-            # a burst from another thread, our id and another: ours arrive, in order, in the loop's thread
+            # a flood from another thread, our id and another: ours arrive, in order, in the loop's thread
             def burst() -> None:
-                for i in range(200):
+                for i in range(2000):
                     arb = 0x222 if i % 2 == 0 else 0x300
                     peer.send(can.Message(arbitration_id=arb, data=bytes([i % 256]), is_extended_id=False))
 
             await asyncio.to_thread(burst)
             for _ in range(200):
-                if len(got) >= 100:
+                if len(got) >= 1000:
                     break
                 await asyncio.sleep(0.01)
-            assert [d[0] for _, d, _ in got] == [i for i in range(0, 200, 2)]
+            # (1000 of ours: more than READ_BATCH, so the loop reads them over several turns)
+            assert [d[0] for _, d, _ in got] == [i % 256 for i in range(0, 2000, 2)]
             assert {t for _, _, t in got} == {threading.get_ident()}
-            assert link.frames_in == 100
+            assert link.frames_in == 1000
 
             # sent from the loop and from another thread at once: each command's frames stay together
             sent = asyncio.Event()

@@ -27,6 +27,7 @@ import os
 import queue
 import threading
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import can
@@ -44,10 +45,24 @@ __all__ = ["NONBLOCKING_SEND", "CanLink", "LinkError"]
 NONBLOCKING_SEND = frozenset({"virtual"})
 
 
-def _own_fileno(bus: can.BusABC) -> tuple[int, Callable[[], None]] | None:
+@dataclass(frozen=True, slots=True)
+class _LoopReader:
+    """A descriptor the loop watches for a bus: ``clear()`` before reading (a signal pipe's bytes),
+    ``close()`` when the link closes."""
+
+    fd: int
+    clear: Callable[[], None] = lambda: None
+    close: Callable[[], None] = lambda: None
+
+
+#: frames the loop takes per wake-up before it lets other callbacks run (then it comes back at once)
+READ_BATCH = 256
+
+
+def _own_fileno(bus: can.BusABC) -> _LoopReader | None:
     """The bus's own descriptor (socketcan: its raw CAN socket; python-can's ``Notifier(loop=)`` watches
-    the same one). Nothing to undo."""
-    return bus.fileno(), lambda: None
+    the same one)."""
+    return _LoopReader(bus.fileno())
 
 
 class _SignalledQueue(queue.Queue[Any]):
@@ -64,7 +79,7 @@ class _SignalledQueue(queue.Queue[Any]):
             os.write(self._wfd, b"\0")
 
 
-def _virtual_fileno(bus: can.BusABC) -> tuple[int, Callable[[], None]] | None:
+def _virtual_fileno(bus: can.BusABC) -> _LoopReader | None:
     """python-can's ``virtual`` bus has no descriptor: its frames arrive in a ``queue.Queue`` that every
     sender on the channel puts into (``bus.queue``, listed in ``bus.channel``). Swap it, under the
     module's ``channels_lock``, for a :class:`_SignalledQueue` tied to a pipe; the loop watches the pipe.
@@ -93,18 +108,22 @@ def _virtual_fileno(bus: can.BusABC) -> tuple[int, Callable[[], None]] | None:
         except queue.Empty:
             break
 
-    def undo() -> None:
+    def clear() -> None:
+        with contextlib.suppress(BlockingIOError, OSError):
+            os.read(rfd, 4096)
+
+    def close() -> None:
         for fd in (rfd, wfd):
             with contextlib.suppress(OSError):
                 os.close(fd)
 
-    return rfd, undo
+    return _LoopReader(rfd, clear, close)
 
 
 #: Interfaces the loop reads itself (``add_reader`` on a descriptor, then ``bus.recv(0)`` until empty),
 #: and how to get their descriptor; every other interface is read by python-can's notifier thread
 #: (slcan and serial adapters buffer partial lines behind their descriptor; vendor drivers have none).
-LOOP_READ: dict[str, Callable[[can.BusABC], tuple[int, Callable[[], None]] | None]] = {
+LOOP_READ: dict[str, Callable[[can.BusABC], _LoopReader | None]] = {
     "socketcan": _own_fileno,
     "virtual": _virtual_fileno,
 }
@@ -157,7 +176,8 @@ class CanLink:
         self._bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
         #: the descriptor the loop watches and what undoes it (None: the notifier thread reads)
-        self._reader: tuple[int, Callable[[], None]] | None = None
+        self._reader: _LoopReader | None = None
+        self._reader_due = False  # a read is scheduled for the next turn of the loop (a flood)
         self._sendq: queue.SimpleQueue[can.Message | _Sent | None] = queue.SimpleQueue()
         self._sender: threading.Thread | None = None
         self._direct = interface in NONBLOCKING_SEND  # sent by the caller's thread (see NONBLOCKING_SEND)
@@ -198,14 +218,14 @@ class CanLink:
         except (can.CanError, OSError, ValueError, ImportError) as exc:
             raise LinkError(f"cannot open {self.interface} {self.channel}: {exc}") from None
         self._bus = bus
-        self._reader = None
+        self._reader, self._reader_due = None, False
         watch = LOOP_READ.get(self.interface)
         try:
             self._reader = watch(bus) if watch is not None else None
         except (NotImplementedError, OSError, ValueError):
             self._reader = None
         if self._reader is not None:
-            self._loop.add_reader(self._reader[0], self._readable, bus)
+            self._loop.add_reader(self._reader.fd, self._readable, bus)
         else:
             self._notifier = can.Notifier(bus, [_Listener(self)], timeout=0.05)
         self._sendq = queue.SimpleQueue()
@@ -239,11 +259,10 @@ class CanLink:
     def close(self) -> None:
         self._up = False
         if self._reader is not None:
-            fd, undo = self._reader
-            self._reader = None
+            reader, self._reader = self._reader, None
             with contextlib.suppress(Exception):
-                self._loop.remove_reader(fd)
-            undo()
+                self._loop.remove_reader(reader.fd)
+            reader.close()
         if self._notifier is not None:
             with contextlib.suppress(Exception):
                 self._notifier.stop(timeout=1.0)
@@ -297,20 +316,30 @@ class CanLink:
         return True
 
     def _readable(self, bus: can.BusABC) -> None:
-        """In the loop: the bus's descriptor is readable; take every frame waiting (one wake-up may stand
-        for several) and hand ours to ``on_frame`` directly."""
+        """In the loop: the bus's descriptor is readable; take the frames waiting (one wake-up may stand
+        for several; at most :data:`READ_BATCH`, then the rest on the next turn of the loop) and hand ours
+        to ``on_frame`` directly."""
         reader = self._reader
-        if reader is None:
+        if reader is None or self._reader_due:
             return
-        if self.interface == "virtual":
-            with contextlib.suppress(BlockingIOError, OSError):
-                os.read(reader[0], 4096)  # the pipe's bytes first: a frame put after this wakes us again
+        reader.clear()  # first: a frame put after this signals again
         try:
-            while self._reader is not None and (msg := bus.recv(0)) is not None:
+            for _ in range(READ_BATCH):
+                if self._reader is not reader or (msg := bus.recv(0)) is None:
+                    return
                 if self._accept(msg):
                     self.on_frame(msg.arbitration_id, bytes(msg.data))
         except (can.CanError, OSError, ValueError) as exc:
             self._failed(f"receive failed: {type(exc).__name__}: {exc}")
+            return
+        self._reader_due = True  # a flood: let other callbacks run, then read on
+
+        def again() -> None:
+            self._reader_due = False
+            if self._reader is reader:  # (not a link closed, or reopened on another bus, meanwhile)
+                self._readable(bus)
+
+        self._loop.call_soon(again)
 
     # -- threads ----------------------------------------------------------------------------------
     def _send_loop(self, bus: can.BusABC, q: queue.SimpleQueue[can.Message | _Sent | None]) -> None:
