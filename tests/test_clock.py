@@ -152,12 +152,12 @@ def test_gateway_on_a_manual_clock_device_deadline_and_offline_timeout(
             gimbal = gw.app.devices.by_sn("RSDK-CLOCK-1")
             wait_until(lambda: gimbal.online, 10, what="gimbal online (no clock move)")
             # answered while the gimbal talks: the clock need not move for a reply that comes
-            ok = cloud.service("x_rsdk_version_get", {"payload_index": "1001-0-0"})
+            ok = cloud.service("x_rsdk_version_get", {"payload_index": "20-0-0"})
             assert ok["data"]["result"] == 0
             sim.stop()  # the gimbal falls silent; its CAN bus stays up
             tid = "clock-deadline-1"
             cloud.publish(f"thing/product/{GW}/services", {"tid": tid, "bid": "b", "timestamp": 0,
-                          "method": "x_rsdk_version_get", "data": {"payload_index": "1001-0-0"}})  # fmt: skip
+                          "method": "x_rsdk_version_get", "data": {"payload_index": "20-0-0"}})  # fmt: skip
             time.sleep(0.3)  # in real time nothing is due: the deadline is on the manual clock
             assert not cloud.find("services_reply", lambda b: b.get("tid") == tid)
             assert gw.app.dispatcher is not None and gw.app.dispatcher.in_flight == 1  # on its deadline
