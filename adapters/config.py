@@ -17,12 +17,14 @@ DEVICE_MODEL_CONFIG = ConfigDict(extra="forbid", frozen=True)
 
 class ProductSettings(BaseModel):
     """What ``update_topo`` says about a device: the Cloud API product enumeration (domain, type,
-    sub_type). The defaults are the gateway's own: DJI RC Plus, ``2-119-0``, the gateway DJI Pilot 2 runs
-    on for the Onboard-SDK airframes (docs/cloud-api.md "Device identity"); each family sets its own."""
+    sub_type). The defaults are the gateway's own: DJI Dock, ``3-1-0``, the gateway whose services
+    (wayline tasks, return home, live control on a broker of the cloud's choosing) this one serves, and
+    the only kind DJI's reference cloud sends them to (docs/cloud-api.md "Device identity"); each family
+    sets its own."""
 
     model_config = DEVICE_MODEL_CONFIG
-    domain: str = "2"
-    type: int = 119
+    domain: str = "3"
+    type: int = 1
     sub_type: int = 0
     thing_version: str = "1.1.2"
     device_secret: SecretStr | None = None

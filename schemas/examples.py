@@ -1025,8 +1025,8 @@ GATEWAY_EXAMPLES: tuple[GatewayExample, ...] = (
             "gateway": _GW,
             "method": "update_topo",
             "data": {
-                "domain": "2",
-                "type": 119,
+                "domain": "3",
+                "type": 1,
                 "sub_type": 0,
                 "device_secret": "secret",
                 "nonce": "nonce",

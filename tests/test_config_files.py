@@ -151,5 +151,5 @@ def test_device_identity_defaults_and_payload_index() -> None:
     assert [(p.domain, p.type, p.sub_type) for p in (aircraft, robot, gateway)] == [
         ("0", 60, 0),
         ("2", 56, 0),
-        ("2", 119, 0),
+        ("3", 1, 0),
     ]

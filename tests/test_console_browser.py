@@ -445,7 +445,7 @@ def test_the_page_validates_a_form_before_sending_it(chromium: Any, gateway: dic
             page.wait_for_selector("#signedin:not([hidden])", timeout=5000)
         page.select_option("#action-device", "RSDK-SIM-0001")
         page.select_option("#action-method", "camera_aim")
-        good = {"payload_index": "1001-0-0", "x": "0.5", "y": "0.5"}
+        good = {"payload_index": "20-0-0", "x": "0.5", "y": "0.5"}
         bad = {"payload_index": "gimbal one", "x": "1.9"}
         for name, value in {**good, **bad}.items():
             page.fill(f'#action-form [name="{name}"]', value)
