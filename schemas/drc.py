@@ -17,6 +17,7 @@ from .base import (
     Bool,
     Float,
     InboundModel,
+    Int,
     IntEnumField,
     Latitude,
     Longitude,
@@ -74,6 +75,22 @@ class DroneControl(InboundModel):
         le=90,
         json_schema_extra={"x-unit": "°/s"},
         description="Yaw rate (°/s); positive is clockwise.",
+    )
+    # DJI's Java Cloud SDK (DroneControlRequest) adds these two; its own ranges. Accepted and not used:
+    # the gateway streams the set-point at drc.stream_hz and zeroes it after drc.stick_timeout itself.
+    freq: Int | None = Field(
+        default=None,
+        ge=2,
+        le=10,
+        json_schema_extra={"x-unit": "Hz"},
+        description="Java Cloud SDK: the rate the cloud sends sticks at. Accepted, not used (drc.stream_hz).",
+    )
+    delay_time: Int | None = Field(
+        default=None,
+        ge=100,
+        le=1000,
+        json_schema_extra={"x-unit": "ms"},
+        description="Java Cloud SDK: how long one stick holds. Accepted, not used (drc.stick_timeout).",
     )
 
 

@@ -208,6 +208,16 @@ def test_heart_beat_spellings(raw: dict[str, Any]) -> None:
     assert message.data == HeartBeat(seq=10, timestamp=1670415891013)
 
 
+def test_drone_control_takes_the_java_sdks_freq_and_delay_time_in_its_ranges() -> None:
+    """DJI's Java Cloud SDK sends freq (2..10 Hz) and delay_time (100..1000 ms) beside the axes:
+    declared with the SDK's ranges (accepted, not used), refused outside them, integral floats read."""
+    stick = DroneControl.model_validate({"seq": 1, "y": 1.0, "freq": 10, "delay_time": 100.0})
+    assert (stick.freq, stick.delay_time) == (10, 100)
+    for bad in ({"freq": 11}, {"freq": 1}, {"delay_time": 99}, {"delay_time": 1001}, {"freq": 5.5}):
+        with pytest.raises(ValidationError):
+            DroneControl.model_validate({"seq": 1, **bad})
+
+
 def test_heart_beat_inside_wins_and_seq_is_optional() -> None:
     raw = {"method": "heart_beat", "timestamp": 5, "data": {"ts": 6}}
     assert REGISTRY.validate(TopicKind.DRC_DOWN, raw).data == HeartBeat(seq=None, timestamp=6)
