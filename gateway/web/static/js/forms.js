@@ -45,8 +45,10 @@ function field(container, name, schema, root, required, value, readers) {
     const set = h("fieldset", { "data-path": name }, h("legend", {}, label));
     container.append(set);
     const req = new Set(s.required || []);
+    // inside an optional object nothing is filled in by default (a select offers "(not set)"): left
+    // alone, the object is not sent at all; the validation still asks for its required fields once one is set
     for (const [key, sub] of Object.entries(s.properties)) {
-      field(set, `${name}.${key}`, sub, root, req.has(key), value && typeof value === "object" ? value[key] : undefined, readers);
+      field(set, `${name}.${key}`, sub, root, required && req.has(key), value && typeof value === "object" ? value[key] : undefined, readers);
     }
     return;
   }
