@@ -246,10 +246,16 @@ def test_every_readme_command_block_runs_as_a_reader_would() -> None:
         # the walkthrough is clean by default: the monitor answered the events, none was re-sent or lost
         assert "was never answered" not in everything
     finally:
-        for proc, _ in services.values():
+        # after a failure too: Ctrl-C first, so `make run` stops the mosquitto it started (a SIGKILL left it
+        # running, one orphaned broker per failed run), then kill what is still there
+        for proc, _ in reversed(list(services.values())):
             if proc.poll() is None:
-                proc.kill()
-                proc.wait(5)
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(15)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait(5)
             if proc.stdout:
                 proc.stdout.close()
 
