@@ -41,7 +41,10 @@ def test_gateway_fails_over_when_its_nats_node_is_killed(cluster: NatsCluster) -
     print(f"\nfailover: on node {r.node + 1} {r.reconnected:.2f} s after the kill, answered again "
           f"after {r.first_answer:.2f} s, {r.requests} requests, {r.redelivered} twice")  # fmt: skip
     assert r.node != 0 and r.after >= 20
-    assert r.reconnected < 10.0, r  # the gateway's own part (~0.5 s)
+    # the gateway's own part is ~0.5 s, but NATS refuses CONNECTs (closed before CONNACK) until the
+    # surviving nodes have elected new JetStream leaders: 9.7-9.8 s in about one run in four here.
+    # The 10 s target is measured by `make bench` (failover suite); this deadline is for a loaded CI
+    assert r.reconnected < 15.0, r
     # answers wait for NATS too: while the dead node led the stream of MQTT QoS 1 messages, the others
     # elect a new leader (Raft, 4-9 s in 2.9) before any QoS 1 publish goes through (docs/brokers.md);
     # 10 s is the target (make bench reports it), the deadline here is generous for a loaded machine
