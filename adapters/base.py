@@ -2,24 +2,16 @@
 
 An adapter owns one device: its link, its codec, its simulator-facing behaviour, and the mapping
 from Cloud API methods to device commands and from device pushes to ``osd`` / ``state`` /
-``events``. It raises the small exception tree below instead of returning sentinel values, so the
-dispatcher maps every failure to one Cloud API result code in one place. Adapters never see MQTT
-or JSON: they get validated pydantic ``data`` models and report through a :class:`TelemetrySink`.
+``events``. It raises the ``DeviceError`` tree of :mod:`adapters.errors` instead of returning
+sentinel values, so the dispatcher maps every failure to one Cloud API result code in one place.
+Adapters never see MQTT or JSON: they get validated pydantic ``data`` models and report through a
+:class:`TelemetrySink`.
 
 Besides the methods and the failsafe, the contract says what the gateway may read of an adapter, so it
 never reaches into one: :meth:`Adapter.link_stats` (the link as an operator sees it,
 :class:`LinkStats`), :meth:`Adapter.observe_link` (the console's frame tap), :attr:`Adapter.last_heard`,
 and the typed snapshots live control needs (:meth:`Adapter.aircraft_pose`, :meth:`Adapter.gimbal_attitude`).
 :class:`Domain` names the Cloud API domains the gateway tells devices apart by.
-
-Error tree (adapter side; the gateway maps it to result codes in ``gateway/dispatcher.py``)::
-
-    DeviceError
-     ├── DeviceNotConnected   → 325012  link down or device silent
-     ├── DeviceTimeout        → 325004  no answer before the deadline
-     ├── MethodNotSupported   → 314404  the device cannot do this method (e.g. zoom on a gimbal)
-     ├── InvalidParameters    → 325001  in range for the contract, out of range for this device
-     └── DeviceRejected       → the result code it carries (the device answered "no")
 """
 
 from __future__ import annotations
@@ -30,55 +22,21 @@ from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from adapters.errors import MethodNotSupported
 from schemas.base import InboundModel
 
 __all__ = [
     "Adapter",
     "AircraftPose",
     "CallResult",
-    "DeviceError",
     "DeviceInfo",
-    "DeviceNotConnected",
-    "DeviceRejected",
-    "DeviceTimeout",
     "Domain",
     "FrameObserver",
     "GimbalAttitude",
     "Handler",
-    "InvalidParameters",
     "LinkStats",
-    "MethodNotSupported",
     "TelemetrySink",
 ]
-
-
-class DeviceError(Exception):
-    """Base of every adapter failure; the message is safe to send to the cloud (no secrets)."""
-
-
-class DeviceNotConnected(DeviceError):
-    pass
-
-
-class DeviceTimeout(DeviceError):
-    pass
-
-
-class MethodNotSupported(DeviceError):
-    pass
-
-
-class InvalidParameters(DeviceError):
-    pass
-
-
-class DeviceRejected(DeviceError):
-    """The device answered with an error; ``result`` is the Cloud API code it maps to."""
-
-    def __init__(self, result: int, message: str, detail: Mapping[str, Any] | None = None) -> None:
-        super().__init__(message)
-        self.result = result
-        self.detail = dict(detail or {})
 
 
 class Domain(enum.StrEnum):

@@ -31,13 +31,11 @@ from typing import Any
 
 import serial
 
+from adapters.errors import LinkError
+
 log = logging.getLogger(__name__)
 
-__all__ = ["LinkError", "SerialLink"]
-
-
-class LinkError(Exception):
-    """The serial link could not be opened or failed while in use."""
+__all__ = ["SerialLink"]
 
 
 _READ_ERRORS = (serial.SerialException, OSError, TypeError, AttributeError, ValueError)

@@ -24,6 +24,7 @@ from typing import Any, ClassVar, Protocol
 from adapters.absence import Absence
 from adapters.base import Adapter, DeviceInfo, FrameObserver, LinkStats, TelemetrySink
 from adapters.clock import Clock
+from adapters.errors import LinkError
 from adapters.wire.stream import DecoderStats, StreamDecoder
 
 __all__ = ["SupervisedAdapter", "SupervisedLink", "SupervisionTiming"]
@@ -87,7 +88,7 @@ class SupervisionTiming(Protocol):
 class SupervisedAdapter(Adapter):
     """An adapter whose device sits behind one link that fails and comes back.
 
-    A subclass sets :attr:`noun`, :attr:`link_error` and :attr:`_log`, builds ``self._link`` in
+    A subclass sets :attr:`noun` and :attr:`_log`, builds ``self._link`` in
     ``start()`` (with :meth:`_on_link_down` as its ``on_down``), starts :meth:`_supervise` as a task
     in ``self._tasks``, stamps ``self._last_heard`` and calls ``_set_online(True)`` when a frame
     arrives, and ends with :meth:`_end_supervision` in ``stop()``.
@@ -95,8 +96,6 @@ class SupervisedAdapter(Adapter):
 
     #: how log lines name the device ("gimbal", "aircraft", "robot")
     noun: ClassVar[str]
-    #: what the family's link raises when it cannot open (each link module has its own)
-    link_error: ClassVar[type[Exception]]
     #: the family module's logger, so supervision's log lines keep the family's logger name
     _log: ClassVar[logging.Logger]
 
@@ -136,7 +135,7 @@ class SupervisedAdapter(Adapter):
                 what = f"{self.noun} {self.info.sn}"
                 try:
                     await link.open()
-                except self.link_error as exc:
+                except LinkError as exc:
                     # absent hardware: said once with a hint, then quiet and backing off (adapters/absence.py)
                     decision = self._absence.failed(self._now(), str(exc), what)
                     self._log.log(decision.level, "%s", decision.message)

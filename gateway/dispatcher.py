@@ -22,9 +22,8 @@ from typing import Any, Protocol
 
 from pydantic import BaseModel, ValidationError
 
-from adapters.base import (
-    Adapter,
-    CallResult,
+from adapters.base import Adapter, CallResult
+from adapters.errors import (
     DeviceError,
     DeviceNotConnected,
     DeviceRejected,

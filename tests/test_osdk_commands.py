@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from adapters.errors import UnknownCommandError
 from adapters.osdk import commands as c
 from adapters.osdk import describe
 from adapters.osdk.commands import (
@@ -21,7 +22,6 @@ from adapters.osdk.commands import (
     GS_ACK_CODES,
     TABLE,
     CommandSpec,
-    UnknownCommand,
     decode_ack,
     decode_request,
     encode_ack_payload,
@@ -419,7 +419,7 @@ def test_emergency_brake_is_the_advanced_preset() -> None:
     assert decode_request(0x01, 0x03, other).name == "advanced_movement_control"
     with pytest.raises(LayoutError, match="flag is fixed"):
         encode_request("emergency_brake", {"flag": 0x49})
-    with pytest.raises(UnknownCommand, match="does not exist on firmware 'm100'"):
+    with pytest.raises(UnknownCommandError, match="does not exist on firmware 'm100'"):
         spec_for("emergency_brake", "m100")
 
 
@@ -449,7 +449,7 @@ def test_go_home_altitude_write_bytes() -> None:
         encode_request("go_home_altitude_write", {"hash": 1, "altitude": 60})
     with pytest.raises(LayoutError):  # another parameter's hash is not this command
         decode_request(0x01, 0x42, bytes.fromhex("01000000 3c00"))
-    with pytest.raises(UnknownCommand, match="does not exist on firmware 'm100'"):
+    with pytest.raises(UnknownCommandError, match="does not exist on firmware 'm100'"):
         spec_for("go_home_altitude_write", "m100")
 
 
@@ -460,9 +460,9 @@ def test_kill_switch_layout() -> None:
 
 
 def test_lookup_errors_name_the_valid_choices() -> None:
-    with pytest.raises(UnknownCommand, match="valid: get_version, activate"):
+    with pytest.raises(UnknownCommandError, match="valid: get_version, activate"):
         spec_for("take_off")
-    with pytest.raises(UnknownCommand, match="no command 0x09 0x09"):
+    with pytest.raises(UnknownCommandError, match="no command 0x09 0x09"):
         decode_request(0x09, 0x09, b"")
     with pytest.raises(LayoutError, match=r"unknown field\(s\) \['spead'\]"):
         encode_request("hp_set_radius", {"spead": 1})
@@ -473,7 +473,7 @@ def test_lookup_errors_name_the_valid_choices() -> None:
 @given(st.integers(0, 3), st.integers(0, 0x40), st.binary(max_size=120))
 def test_random_payloads_never_raise_anything_else(cmd_set: int, cmd_id: int, payload: bytes) -> None:
     for firmware in ("new", "m100"):
-        with contextlib.suppress(UnknownCommand, LayoutError):
+        with contextlib.suppress(UnknownCommandError, LayoutError):
             decode_request(cmd_set, cmd_id, payload, firmware)
 
 

@@ -19,6 +19,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from adapters.errors import UnknownCommandError
 from adapters.osdk import commands as cmds
 from adapters.osdk import subscription as sub
 from adapters.osdk.protocol import encode_command
@@ -128,7 +129,7 @@ def test_verify_reset_remove_payloads() -> None:
         spec = cmds.spec_for(name)
         assert spec.ack_codes is sub.SUBSCRIBE_ACK and spec.firmware == "new"
         assert cmds.decode_ack(name, b"\x25").fields == {"ack": 0x25}
-        with pytest.raises(cmds.UnknownCommand):
+        with pytest.raises(UnknownCommandError):
             cmds.spec_for(name, "m100")  # the library never subscribes on an M100
     assert sub.SUBSCRIBE_ACK[0x25] == "source device offline" and sub.SUBSCRIBE_ACK[0x23] == "permission deny"
     with pytest.raises(LayoutError, match="whole number"):
@@ -178,7 +179,7 @@ def test_random_subscription_payloads_decode_or_raise_layout_error(cmd_id: int, 
     try:
         cmds.decode_request(0x0B, cmd_id, payload)
         cmds.decode_request(0x02, 0x05, payload)
-    except (cmds.UnknownCommand, LayoutError):
+    except (UnknownCommandError, LayoutError):
         pass
 
 

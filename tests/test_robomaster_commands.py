@@ -15,6 +15,7 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
+from adapters.errors import CommandError, UnknownCommandError
 from adapters.robomaster import describe
 from adapters.robomaster.commands import (
     COMMAND_NAMES,
@@ -28,9 +29,7 @@ from adapters.robomaster.commands import (
     Bits,
     ControlChannel,
     Message,
-    MessageError,
     RefereeCommand,
-    UnknownCommandError,
     check_season,
     codec_field_names,
     decode_message,
@@ -153,7 +152,7 @@ def test_wrong_sizes_are_rejected_per_season(entry: RefereeCommand, season: str)
     for n in range(top + 3):
         if any(lo <= n <= hi for lo, hi in ranges):
             continue
-        with pytest.raises(MessageError) as info:
+        with pytest.raises(CommandError) as info:
             decode_payload(entry.cmd_id, bytes(n), season)
         text = str(info.value)
         assert f"0x{entry.cmd_id:04X}" in text and f"season {season}" in text
@@ -163,17 +162,17 @@ def test_wrong_sizes_are_rejected_per_season(entry: RefereeCommand, season: str)
 
 def test_size_error_message_names_everything() -> None:
     with pytest.raises(
-        MessageError, match=r"^cmd_id 0x0202 \(power_heat_data\), season 2026: payload is 16 bytes, "
+        CommandError, match=r"^cmd_id 0x0202 \(power_heat_data\), season 2026: payload is 16 bytes, "
     ):
         decode_payload(0x0202, bytes(16), "2026")
-    with pytest.raises(MessageError, match="expected 12 or 16"):
+    with pytest.raises(CommandError, match="expected 12 or 16"):
         decode_payload(0x0203, bytes(13), "2025")
 
 
 def test_a_2024_payload_is_refused_in_2026() -> None:
     hp_2024 = bytes(32)
     assert decode_payload(0x0003, hp_2024, "2024").name == "game_robot_hp"
-    with pytest.raises(MessageError, match="expected 16"):
+    with pytest.raises(CommandError, match="expected 16"):
         decode_payload(0x0003, hp_2024, "2026")
 
 
@@ -277,7 +276,7 @@ def test_interaction_sub_header_and_tail() -> None:
     assert encode_payload("robot_interaction_data", msg.fields, "2024") == (0x0301, payload)
     full = struct.pack("<HHH", 0x0201, 3, 7) + bytes(INTERACTION_MAX_USER_DATA)
     assert len(encode_frame(0x0301, full)) == 127
-    with pytest.raises(MessageError, match=r"expected 6\.\.118"):
+    with pytest.raises(CommandError, match=r"expected 6\.\.118"):
         decode_payload(0x0301, full + b"\x00", "2026")
     with pytest.raises(ValueError, match="at most 112"):
         encode_payload("robot_interaction_data", {"user_data": bytes(113)}, "2026")
@@ -409,12 +408,12 @@ def test_control_channel_refuses_official_ids(kwargs: dict[str, int]) -> None:
 
 
 def test_control_payload_errors() -> None:
-    with pytest.raises(MessageError, match="unknown message type 0x09") as info:
+    with pytest.raises(CommandError, match="unknown message type 0x09") as info:
         decode_payload(0x0F01, b"\x09")
     assert not isinstance(info.value, UnknownCommandError)
-    with pytest.raises(MessageError, match="empty body"):
+    with pytest.raises(CommandError, match="empty body"):
         decode_payload(0x0F01, b"")
-    with pytest.raises(MessageError, match=r"chassis_velocity.*1 bytes.*expected 12") as info:
+    with pytest.raises(CommandError, match=r"chassis_velocity.*1 bytes.*expected 12") as info:
         decode_payload(0x0F01, b"\x01\x00")
     assert info.value.name == "chassis_velocity"
     with pytest.raises(ValueError, match="finite"):

@@ -11,6 +11,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from adapters.errors import CommandError
 from adapters.rsdk import describe
 from adapters.rsdk.commands import (
     BY_NAME,
@@ -18,7 +19,6 @@ from adapters.rsdk.commands import (
     RETURN_CODES,
     TABLE,
     Command,
-    CommandError,
     Message,
     TaggedUnion,
     TlvCodec,
@@ -586,5 +586,5 @@ def test_legacy_angle_reply_in_either_order() -> None:
     fields = {"return_code": 0, "data_type": 1, "yaw": 300, "roll": 50, "pitch": 200}
     latest = Decoder().feed(cmds.encode_command("get_angle", 8, fields, reply=True))[0]
     assert cmds.decode_reply(latest, 0x0E, 0x02, angle_order="yaw_pitch_roll").fields["roll"] == 50
-    with pytest.raises(cmds.CommandError, match="legacy angle order"):
+    with pytest.raises(CommandError, match="legacy angle order"):
         cmds.decode_reply(frame, 0x0E, 0x02, angle_order="pitch_yaw_roll")

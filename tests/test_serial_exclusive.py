@@ -11,7 +11,8 @@ import textwrap
 
 import pytest
 
-from adapters.serial_link import LinkError, SerialLink
+from adapters.errors import LinkError
+from adapters.serial_link import SerialLink
 from adapters.simio import PtyEndpoint
 
 

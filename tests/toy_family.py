@@ -28,18 +28,12 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, Field
 
-from adapters.base import (
-    CallResult,
-    DeviceInfo,
-    DeviceNotConnected,
-    DeviceTimeout,
-    InvalidParameters,
-    TelemetrySink,
-)
+from adapters.base import CallResult, DeviceInfo, TelemetrySink
 from adapters.clock import SYSTEM_CLOCK, Clock
 from adapters.config import DEVICE_MODEL_CONFIG, ProductSettings
+from adapters.errors import DeviceNotConnected, DeviceTimeout, InvalidParameters
 from adapters.families import Family
-from adapters.serial_link import LinkError, SerialLink
+from adapters.serial_link import SerialLink
 from adapters.simio import TcpEndpoint
 from adapters.supervision import SupervisedAdapter
 from adapters.wire.stream import BadFrame, StreamDecoder
@@ -119,7 +113,6 @@ EXTENSIONS = (("x_vane_point", PointRequest, PointReply, "Vane: turn to a headin
 # -- the adapter ------------------------------------------------------------------------------------------
 class VaneAdapter(SupervisedAdapter):
     noun = "vane"
-    link_error = LinkError
     _log = log
     _link: SerialLink | None
 

@@ -41,18 +41,16 @@ from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from adapters.base import (
-    AircraftPose,
-    CallResult,
-    DeviceInfo,
+from adapters.base import AircraftPose, CallResult, DeviceInfo, Handler, TelemetrySink
+from adapters.clock import SYSTEM_CLOCK, Clock
+from adapters.errors import (
     DeviceNotConnected,
     DeviceRejected,
     DeviceTimeout,
-    Handler,
     InvalidParameters,
-    TelemetrySink,
+    LinkError,
+    UnknownCommandError,
 )
-from adapters.clock import SYSTEM_CLOCK, Clock
 from adapters.osdk import commands as cmds
 from adapters.osdk.config import DEFAULT_FREQUENCIES, OsdkDeviceSettings
 from adapters.osdk.extensions import (
@@ -72,7 +70,7 @@ from adapters.osdk.protocol import (
 )
 from adapters.osdk.telemetry import ITEMS as _TELEMETRY_ITEMS
 from adapters.osdk.wayline import OsdkWayline
-from adapters.serial_link import LinkError, SerialLink
+from adapters.serial_link import SerialLink
 from adapters.supervision import SupervisedAdapter
 from adapters.wire.layout import LayoutError
 from adapters.wire.stream import BadFrame
@@ -172,7 +170,6 @@ def _quat_to_euler(w: float, x: float, y: float, z: float) -> tuple[float, float
 
 class AircraftAdapter(SupervisedAdapter):
     noun = "aircraft"
-    link_error = LinkError
     _log = log
     _link: SerialLink | None
 
@@ -476,7 +473,7 @@ class AircraftAdapter(SupervisedAdapter):
             return
         try:
             msg = cmds.decode_request(frame.cmd_set, frame.cmd_id, frame.payload, self.fw)
-        except (cmds.UnknownCommand, LayoutError):
+        except (UnknownCommandError, LayoutError):
             msg = None
         if frame.session >= 1:
             with contextlib.suppress(LinkError, LayoutError):

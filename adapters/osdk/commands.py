@@ -27,6 +27,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from adapters.errors import UnknownCommandError
 from adapters.osdk.protocol import SessionMode
 from adapters.osdk.subscription import ADD_PACKAGE, PACKAGE_DATA, PACKAGE_ID, RESET, SUBSCRIBE_ACK, VERIFY
 from adapters.osdk.telemetry import FlightDataCodec, check_firmware, examples_of
@@ -58,7 +59,6 @@ __all__ = [
     "FirmwareCodes",
     "Message",
     "Union",
-    "UnknownCommand",
     "ack_text",
     "control_flag",
     "decode_ack",
@@ -971,10 +971,6 @@ COMMAND_NAMES: tuple[str, ...] = tuple(BY_NAME)
 # Lookup, encode, decode
 
 
-class UnknownCommand(ValueError):
-    """No table entry for a name or a (cmd_set, cmd_id)."""
-
-
 @dataclass(frozen=True, slots=True)
 class Message:
     """A decoded command, push or ACK payload (wire units)."""
@@ -991,14 +987,14 @@ def _fits(spec: CommandSpec, firmware: str) -> bool:
 
 
 def spec_for(name: str, firmware: str = "new") -> CommandSpec:
-    """The spec of a command name for this firmware, or :class:`UnknownCommand` listing the names."""
+    """The spec of a command name for this firmware, or :class:`UnknownCommandError` listing the names."""
     check_firmware(firmware)
     for spec in BY_NAME.get(name, ()):
         if _fits(spec, firmware):
             return spec
     if name in BY_NAME:
-        raise UnknownCommand(f"command {name!r} does not exist on firmware {firmware!r}")
-    raise UnknownCommand(f"unknown command {name!r}; valid: {', '.join(COMMAND_NAMES)}")
+        raise UnknownCommandError(f"command {name!r} does not exist on firmware {firmware!r}")
+    raise UnknownCommandError(f"unknown command {name!r}; valid: {', '.join(COMMAND_NAMES)}")
 
 
 def specs_at(cmd_set: int, cmd_id: int, firmware: str = "new") -> tuple[CommandSpec, ...]:
@@ -1018,7 +1014,7 @@ def _encode(spec: CommandSpec, codec: PayloadCodec, fields: Mapping[str, Any] | 
 
 def encode_request(name: str, fields: Mapping[str, Any] | None = None, firmware: str = "new") -> bytes:
     """The payload (after CmdSet/CmdID) of command ``name``: missing fields take the spec's defaults,
-    then zero. Raises :class:`UnknownCommand` or :class:`LayoutError` (unknown field, out of range)."""
+    then zero. Raises :class:`UnknownCommandError` or :class:`LayoutError` (unknown field, out of range)."""
     spec = spec_for(name, firmware)
     return _encode(spec, spec.request[0], fields)
 
@@ -1048,11 +1044,11 @@ def _decode_with(
 
 
 def decode_request(cmd_set: int, cmd_id: int, payload: bytes, firmware: str = "new") -> Message:
-    """Decode a command or push payload. :class:`UnknownCommand` if the id is not in the table,
+    """Decode a command or push payload. :class:`UnknownCommandError` if the id is not in the table,
     :class:`LayoutError` if the payload fits none of its layouts."""
     specs = specs_at(cmd_set, cmd_id, firmware)
     if not specs:
-        raise UnknownCommand(f"no command 0x{cmd_set:02X} 0x{cmd_id:02X} on firmware {firmware!r}")
+        raise UnknownCommandError(f"no command 0x{cmd_set:02X} 0x{cmd_id:02X} on firmware {firmware!r}")
     for spec in specs:
         fields = _decode_with(spec.request, bytes(payload), spec.fixed)
         if fields is not None:

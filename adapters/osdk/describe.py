@@ -14,12 +14,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from adapters.errors import UnknownCommandError
 from adapters.osdk import protocol
 from adapters.osdk.commands import (
     COMMAND_NAMES,
     CommandSpec,
     Union,
-    UnknownCommand,
     ack_text,
     decode_ack,
     decode_request,
@@ -109,7 +109,7 @@ def decode_bytes(data: bytes, **options: Any) -> list[dict[str, Any]]:
         assert item.cmd_set is not None and item.cmd_id is not None
         try:
             msg = decode_request(item.cmd_set, item.cmd_id, item.payload, firmware)
-        except UnknownCommand:
+        except UnknownCommandError:
             d["payload"] = item.payload.hex()
         except LayoutError as exc:
             names = sorted({s.name for s in specs_at(item.cmd_set, item.cmd_id, firmware)})

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Generic, TypeVar
 
+from adapters.errors import FrameError
 from adapters.wire.dji_frame import (
     BAD_HEADER_CRC,
     BAD_SOF,
@@ -65,7 +66,6 @@ __all__ = [
     "Decoder",
     "DuplicateFilter",
     "Frame",
-    "FrameError",
     "FrameRules",
     "Pending",
     "PollResult",
@@ -86,10 +86,6 @@ MIN_DATA_FRAME_LEN = HEADER_LEN + CRC32_LEN  # 16: a CRC32 with empty data, as O
 FIRST_REQUIRED_SESSION = 2
 LAST_SESSION = 31
 ENCRYPTED_REASON = "encrypted frame, no key configured"
-
-
-class FrameError(ValueError):
-    """A frame cannot be built or parsed (bad argument, CRC, length, encryption)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -53,25 +53,14 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from adapters.base import (
-    CallResult,
-    DeviceInfo,
-    DeviceNotConnected,
-    DeviceRejected,
-    InvalidParameters,
-    TelemetrySink,
-)
+from adapters.base import CallResult, DeviceInfo, TelemetrySink
 from adapters.clock import SYSTEM_CLOCK, Clock
-from adapters.robomaster.commands import (
-    ControlChannel,
-    MessageError,
-    decode_message,
-    encode_message,
-)
+from adapters.errors import CommandError, DeviceNotConnected, DeviceRejected, InvalidParameters, LinkError
+from adapters.robomaster.commands import ControlChannel, decode_message, encode_message
 from adapters.robomaster.config import RobomasterDeviceSettings
 from adapters.robomaster.extensions import ChassisVelocity, GimbalAngle, Interaction, RobotRequest
 from adapters.robomaster.protocol import Decoder, Frame
-from adapters.serial_link import LinkError, SerialLink
+from adapters.serial_link import SerialLink
 from adapters.supervision import SupervisedAdapter
 from schemas.results import ResultCode
 from schemas.services import CameraScreenDrag, FlightAuthorityGrab, GimbalReset
@@ -108,7 +97,6 @@ def _wrap180(deg: float) -> float:
 
 class RobotAdapter(SupervisedAdapter):
     noun = "robot"
-    link_error = LinkError
     _log = log
     _link: SerialLink | None
 
@@ -230,7 +218,7 @@ class RobotAdapter(SupervisedAdapter):
         self._set_online(True)
         try:
             msg = decode_message(frame, self.settings.season, self._control)
-        except MessageError as exc:
+        except CommandError as exc:
             self.undecodable += 1
             log.debug("robot %s: %s", self.info.sn, exc)
             return

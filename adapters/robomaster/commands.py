@@ -62,6 +62,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final
 
+from adapters.errors import CommandError, UnknownCommandError
 from adapters.robomaster.protocol import Frame, encode_frame
 from adapters.wire import bits as wire_bits
 from adapters.wire.layout import Field, Layout, LayoutError, PayloadCodec, Tail
@@ -83,9 +84,7 @@ __all__ = [
     "ControlChannel",
     "ControlCommand",
     "Message",
-    "MessageError",
     "RefereeCommand",
-    "UnknownCommandError",
     "check_season",
     "codec_field_names",
     "decode_message",
@@ -99,19 +98,6 @@ __all__ = [
 
 SEASONS: tuple[str, ...] = ("2024", "2025", "2026")
 DEFAULT_SEASON: Final = "2026"
-
-
-class MessageError(ValueError):
-    """A frame whose payload does not fit its table entry (or names nothing we know)."""
-
-    def __init__(self, message: str, *, cmd_id: int | None = None, name: str | None = None) -> None:
-        super().__init__(message)
-        self.cmd_id = cmd_id
-        self.name = name
-
-
-class UnknownCommandError(MessageError):
-    """The cmd_id is in no table (a valid frame we simply do not decode)."""
 
 
 def check_season(season: str | int) -> str:
@@ -673,16 +659,16 @@ def _decode_control(control: ControlChannel, data: bytes) -> Message:
     body = data[INTERACTION_HEADER.fixed_size :] if control.wrapped else data
     where = f"control cmd_id 0x{control.cmd_id:04X}"
     if not body:
-        raise MessageError(f"{where}: empty body, expected a message type byte", cmd_id=control.cmd_id)
+        raise CommandError(f"{where}: empty body, expected a message type byte", cmd_id=control.cmd_id)
     entry = CONTROL_COMMANDS.get(body[0])
     if entry is None:
         known = ", ".join(f"0x{c.msg_type:02X} {c.name}" for c in _CONTROL_TABLE)
-        raise MessageError(
+        raise CommandError(
             f"{where}: unknown message type 0x{body[0]:02X}; known: {known}", cmd_id=control.cmd_id
         )
     size = size_range(entry.layout)[0]
     if len(body) - 1 != size:
-        raise MessageError(
+        raise CommandError(
             f"{where} ({entry.name}): body is {len(body) - 1} bytes after the type byte, expected {size}",
             cmd_id=control.cmd_id,
             name=entry.name,
@@ -693,7 +679,7 @@ def _decode_control(control: ControlChannel, data: bytes) -> Message:
 def decode_payload(
     cmd_id: int, data: bytes, season: str = DEFAULT_SEASON, control: ControlChannel = DEFAULT_CONTROL
 ) -> Message:
-    """The :class:`Message` for a payload, or :class:`MessageError` saying what does not fit."""
+    """The :class:`Message` for a payload, or :class:`CommandError` saying what does not fit."""
     season = check_season(season)
     data = bytes(data)
     if control.carries(cmd_id, data):
@@ -706,7 +692,7 @@ def decode_payload(
         lo, hi = size_range(codec)
         if lo <= len(data) <= hi:
             return Message(entry.name, cmd_id, codec.decode(data))
-    raise MessageError(
+    raise CommandError(
         f"cmd_id 0x{cmd_id:04X} ({entry.name}), season {season}: payload is {len(data)} bytes, "
         f"expected {_expected(codecs)}",
         cmd_id=cmd_id,
@@ -739,7 +725,9 @@ def encode_payload(
             return control.cmd_id, body
         entry = _REFEREE_BY_NAME.get(name)
         if entry is None:
-            raise ValueError(f"unknown command {name!r}; valid: {', '.join(COMMAND_NAMES)}")
+            raise UnknownCommandError(
+                f"unknown command {name!r}; valid: {', '.join(COMMAND_NAMES)}", name=name
+            )
         return entry.cmd_id, entry.layouts[season][0].encode(fields)
     except LayoutError as exc:
         raise LayoutError(f"{name} (season {season}): {exc}") from exc

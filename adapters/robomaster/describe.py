@@ -14,13 +14,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from adapters.errors import CommandError, UnknownCommandError
 from adapters.robomaster.commands import (
     COMMAND_NAMES,
     DEFAULT_CONTROL,
     DEFAULT_SEASON,
     ControlChannel,
-    MessageError,
-    UnknownCommandError,
     check_season,
     decode_message,
     encode_message,
@@ -98,7 +97,7 @@ def _record(event: Frame | BadFrame, season: str, control: ControlChannel) -> di
         msg = decode_message(event, season, control)
     except UnknownCommandError:
         rec["payload"] = event.data.hex()  # a valid frame we have no table entry for
-    except MessageError as exc:
+    except CommandError as exc:
         rec.update(command=exc.name, error=str(exc), payload=event.data.hex())
     else:
         rec.update(command=msg.name, fields=jsonable(msg.fields))

@@ -40,13 +40,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from adapters.errors import CommandError
 from adapters.families import InProcessSim
 from adapters.robomaster.commands import (
     DEFAULT_CONTROL,
     DEFAULT_SEASON,
     REFEREE_COMMANDS,
     ControlChannel,
-    MessageError,
     RefereeCommand,
     check_season,
     codec_field_names,
@@ -452,7 +452,7 @@ class RobomasterSim:
                     continue
                 try:
                     msg = decode_message(item, self.match.season, self.control)
-                except MessageError:
+                except CommandError:
                     self.undecodable += 1
                     continue
                 self.board.handle(msg.name, msg.fields, now)

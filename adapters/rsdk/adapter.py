@@ -41,28 +41,19 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from adapters.base import (
-    CallResult,
-    DeviceInfo,
+from adapters.base import CallResult, DeviceInfo, GimbalAttitude, TelemetrySink
+from adapters.clock import SYSTEM_CLOCK, Clock
+from adapters.errors import (
+    CommandError,
     DeviceNotConnected,
     DeviceRejected,
     DeviceTimeout,
-    GimbalAttitude,
     InvalidParameters,
+    LinkError,
     MethodNotSupported,
-    TelemetrySink,
 )
-from adapters.clock import SYSTEM_CLOCK, Clock
 from adapters.rsdk.can import Reassembler, segment
-from adapters.rsdk.commands import (
-    TABLE,
-    CommandError,
-    Message,
-    build_frame,
-    decode_message,
-    decode_reply,
-    lookup,
-)
+from adapters.rsdk.commands import TABLE, Message, build_frame, decode_message, decode_reply, lookup
 from adapters.rsdk.config import RsdkDeviceSettings
 from adapters.rsdk.extensions import (
     AngleGet,
@@ -73,7 +64,7 @@ from adapters.rsdk.extensions import (
     LimitAngles,
     Stiffness,
 )
-from adapters.rsdk.link import CanLink, LinkError
+from adapters.rsdk.link import CanLink
 from adapters.rsdk.protocol import Frame, encode
 from adapters.supervision import SupervisedAdapter
 from adapters.wire.stream import DecoderStats
@@ -125,7 +116,6 @@ def _answers_another_command(frame: Frame, cmd_set: int, cmd_id: int) -> bool:
 
 class GimbalAdapter(SupervisedAdapter):
     noun = "gimbal"
-    link_error = LinkError
     _log = log
     _link: CanLink | None
 

@@ -27,6 +27,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from adapters.errors import CommandError, UnknownCommandError
 from adapters.rsdk.protocol import DEFAULT_CMD_TYPE, Frame, encode
 from adapters.wire.layout import Field, Layout, LayoutError, PayloadCodec, Tail
 
@@ -37,7 +38,6 @@ __all__ = [
     "RETURN_CODES",
     "TABLE",
     "Command",
-    "CommandError",
     "Message",
     "TaggedUnion",
     "TlvCodec",
@@ -67,10 +67,6 @@ DEVICE_IDS: dict[int, str] = {
     0x00000001: "DJI R SDK",
     0x00000002: "remote controller",
 }
-
-
-class CommandError(ValueError):
-    """A command name/key is unknown, or a payload does not fit its table entry."""
 
 
 def return_code_text(code: int) -> str:
@@ -894,11 +890,11 @@ def lookup(command: str | tuple[int, int], *, reply: bool = False) -> Command:
     if isinstance(command, str):
         spec = BY_NAME.get(command)
         if spec is None:
-            raise CommandError(f"unknown command {command!r}; valid: {', '.join(COMMANDS)}")
+            raise UnknownCommandError(f"unknown command {command!r}; valid: {', '.join(COMMANDS)}")
         return spec
     entries = TABLE.get((command[0], command[1]))
     if not entries:
-        raise CommandError(f"unknown command key {command!r}; valid names: {', '.join(COMMANDS)}")
+        raise UnknownCommandError(f"unknown command key {command!r}; valid names: {', '.join(COMMANDS)}")
     if reply:
         for e in entries:
             if e.reply is not None:
@@ -995,7 +991,7 @@ def decode_message(frame: Frame) -> Message:
                 f"reply without a known CmdSet/CmdID ({_key_text(frame.cmd_set, frame.cmd_id)}): a legacy "
                 "reply? decode it with decode_reply(frame, sent_cmd_set, sent_cmd_id)"
             )
-        raise CommandError(f"unknown command {_key_text(frame.cmd_set, frame.cmd_id)}")
+        raise UnknownCommandError(f"unknown command {_key_text(frame.cmd_set, frame.cmd_id)}")
     errors = []
     for spec in entries:
         codec = spec.reply if frame.is_reply else spec.command

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from adapters.errors import CommandError
 from adapters.rsdk import commands as cmds
 from adapters.rsdk.can import GIMBAL_TX_ID, HOST_TX_ID, Reassembler, segment
 from adapters.rsdk.candump import parse_lines
@@ -66,7 +67,7 @@ class _Session:
         }
         try:
             msg = self._decode(item)
-        except cmds.CommandError as e:
+        except CommandError as e:
             out["error"] = str(e)
             out["payload"] = item.data.hex()
             return out

@@ -32,9 +32,11 @@ from typing import Any
 
 import can
 
+from adapters.errors import LinkError
+
 log = logging.getLogger(__name__)
 
-__all__ = ["NONBLOCKING_SEND", "CanLink", "LinkError"]
+__all__ = ["NONBLOCKING_SEND", "CanLink"]
 
 #: Interfaces whose ``bus.send(msg, timeout=0)`` returns at once, so frames go on the bus from the
 #: sender's own thread with no hand-off. python-can's ``virtual`` bus puts a copy of each frame into every
@@ -127,10 +129,6 @@ LOOP_READ: dict[str, Callable[[can.BusABC], _LoopReader | None]] = {
     "socketcan": _own_fileno,
     "virtual": _virtual_fileno,
 }
-
-
-class LinkError(Exception):
-    """The CAN link could not be opened or failed while in use."""
 
 
 class _Listener(can.Listener):

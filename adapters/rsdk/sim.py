@@ -29,9 +29,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from adapters.errors import CommandError
 from adapters.families import InProcessSim
 from adapters.rsdk.can import GIMBAL_TX_ID, HOST_TX_ID, Reassembler, segment
-from adapters.rsdk.commands import CommandError, build_frame, decode_message
+from adapters.rsdk.commands import build_frame, decode_message
 from adapters.rsdk.protocol import Frame, encode
 from adapters.simio import PtyEndpoint, TcpEndpoint
 from adapters.wire.slcan import SlcanAdapterState, format_frame

@@ -13,6 +13,8 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from adapters.errors import LayoutError
+
 __all__ = ["Field", "Layout", "LayoutError", "PayloadCodec", "Tail"]
 
 _INT_RANGES = {
@@ -26,10 +28,6 @@ _INT_RANGES = {
     "q": (-0x8000000000000000, 0x7FFFFFFFFFFFFFFF),
 }
 _FLOATS = {"f", "d"}
-
-
-class LayoutError(ValueError):
-    """A payload does not fit its layout (wrong length, value out of the type's range)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -46,7 +46,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
 
-from adapters.base import DeviceNotConnected, DeviceRejected, DeviceTimeout
+from adapters.errors import DeviceNotConnected, DeviceRejected, DeviceTimeout
 from adapters.wayline.kmz import FILE_FORMAT, KmzError, Route, check_fingerprint, parse_wpml, unpack_wpml
 from adapters.wayline.runner import MissionStopped, Reached, RouteRefused
 from gateway.clock import Clock
