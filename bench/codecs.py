@@ -1020,7 +1020,7 @@ def osdk_cases(cfg: Config) -> list[Case]:
         return (f["session"], f["is_ack"], f["seq"], f["data"])
 
     def msg_view(m: osdk_cmd.Message) -> tuple[str, Any]:
-        return (f"{m.name} ack" if m.is_ack else m.name, m.fields)
+        return (f"{m.name} ack" if m.is_reply else m.name, m.fields)
 
     return [
         Case(

@@ -33,16 +33,17 @@ from adapters.osdk.commands import (
 )
 from adapters.osdk.protocol import SessionMode, decode_frame, encode_ack, encode_command
 from adapters.wire.layout import LayoutError
+from adapters.wire.table import Delivery
 
 ALL_SPECS: list[CommandSpec] = [s for specs in TABLE.values() for s in specs]
 
 
 def _id(spec: CommandSpec) -> str:
-    return f"{spec.name}-{spec.firmware or 'any'}"
+    return f"{spec.name}-{spec.variant or 'any'}"
 
 
 def _firmwares(spec: CommandSpec) -> list[str]:
-    return [spec.firmware] if spec.firmware else ["new", "m100"]
+    return [spec.variant] if spec.variant else ["new", "m100"]
 
 
 # ---------------------------------------------------------------------------------------------- table
@@ -73,8 +74,8 @@ def test_table_keys_and_session_rules() -> None:
         assert all(s.key == key for s in specs)
         for s in specs:
             assert s.section and s.direction in (c.TO_FC, c.FROM_FC)
-            if s.session == SessionMode.NO_ACK and s.direction == c.TO_FC:
-                assert not s.ack, s.name  # session 0 means nobody answers
+            if s.delivery.session == SessionMode.NO_ACK and s.direction == c.TO_FC:
+                assert not s.reply, s.name  # session 0 means nobody answers
     ground_station = [s for s in ALL_SPECS if s.cmd_set == 0x03]
     assert sorted(s.cmd_id for s in ground_station) == [
         *range(0x10, 0x18),
@@ -83,12 +84,12 @@ def test_table_keys_and_session_rules() -> None:
     ]
     for s in ground_station:
         if s.name == "fm_update_target":
-            assert (s.ack, s.session) == ((), SessionMode.NO_ACK)  # seed: NO ACK
+            assert (s.reply, s.delivery.session) == ((), SessionMode.NO_ACK)  # seed: NO ACK
         else:
-            assert s.session == SessionMode.ACK_REQUIRED and (s.timeout, s.retries) == (0.5, 2)
-            assert s.ack and s.ack_codes == c.GS_ACK_TEXT
-    assert (spec_for("activate").timeout, spec_for("activate").retries) == (1.0, 3)
-    assert spec_for("movement_control").session == SessionMode.NO_ACK
+            assert s.delivery == Delivery(SessionMode.ACK_REQUIRED, 0.5, 2)
+            assert s.reply and s.reply_codes == c.GS_ACK_TEXT
+    assert (spec_for("activate").delivery.timeout, spec_for("activate").delivery.retries) == (1.0, 3)
+    assert spec_for("movement_control").delivery.session == SessionMode.NO_ACK
 
 
 @pytest.mark.parametrize(
@@ -129,7 +130,7 @@ def test_table_keys_and_session_rules() -> None:
 def test_packed_sizes(name: str, sizes: list[int], ack_sizes: list[int | None]) -> None:
     spec = spec_for(name)
     assert [r.size for r in spec.request] == sizes
-    assert [a.size for a in spec.ack] == ack_sizes
+    assert [a.size for a in spec.reply] == ack_sizes
 
 
 @pytest.mark.parametrize("spec", ALL_SPECS, ids=_id)
@@ -140,21 +141,23 @@ def test_every_request_layout_round_trips(spec: CommandSpec) -> None:
                 values = {**example, **spec.fixed}
                 payload = codec.encode(values)
                 msg = decode_request(spec.cmd_set, spec.cmd_id, payload, firmware)
-                assert (msg.name, msg.is_ack) == (spec.name, False)
+                assert (msg.name, msg.is_reply) == (spec.name, False)
                 assert msg.fields == values
                 # and through a real frame
-                frame = decode_frame(encode_command(spec.cmd_set, spec.cmd_id, payload, int(spec.session), 3))
+                frame = decode_frame(
+                    encode_command(spec.cmd_set, spec.cmd_id, payload, spec.delivery.session, 3)
+                )
                 assert frame.payload == payload
 
 
-@pytest.mark.parametrize("spec", [s for s in ALL_SPECS if s.ack], ids=_id)
+@pytest.mark.parametrize("spec", [s for s in ALL_SPECS if s.reply], ids=_id)
 def test_every_ack_layout_round_trips(spec: CommandSpec) -> None:
     for firmware in _firmwares(spec):
-        for codec in spec.ack:
+        for codec in spec.reply:
             for example in examples_of(codec):
                 data = codec.encode(example)
                 msg = decode_ack(spec.name, data, firmware)
-                assert (msg.name, msg.is_ack, msg.fields) == (spec.name, True, example)
+                assert (msg.name, msg.is_reply, msg.fields) == (spec.name, True, example)
                 assert decode_frame(encode_ack(2, 9, data)).payload == data
 
 

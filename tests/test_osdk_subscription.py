@@ -127,7 +127,7 @@ def test_verify_reset_remove_payloads() -> None:
     assert cmds.encode_request("subscribe_remove_package", {"package_id": 3}) == b"\x03"
     for name in ("subscribe_verify", "subscribe_add_package", "subscribe_reset", "subscribe_remove_package"):
         spec = cmds.spec_for(name)
-        assert spec.ack_codes is sub.SUBSCRIBE_ACK and spec.firmware == "new"
+        assert spec.reply_codes is sub.SUBSCRIBE_ACK and spec.variant == "new"
         assert cmds.decode_ack(name, b"\x25").fields == {"ack": 0x25}
         with pytest.raises(UnknownCommandError):
             cmds.spec_for(name, "m100")  # the library never subscribes on an M100

@@ -74,6 +74,7 @@ from adapters.serial_link import SerialLink
 from adapters.supervision import SupervisedAdapter
 from adapters.wire.layout import LayoutError
 from adapters.wire.stream import BadFrame
+from adapters.wire.table import bind_handlers
 from schemas.base import InboundModel
 from schemas.envelope import EmptyRequest
 from schemas.results import ResultCode, ground_station_ack
@@ -400,9 +401,7 @@ class AircraftAdapter(SupervisedAdapter):
         """Send a command without waiting for its ACK (session 0 commands, failsafe paths)."""
         spec = cmds.spec_for(name, self.fw)
         payload = cmds.encode_request(name, fields, self.fw)
-        sent = self._sessions.send(
-            spec.cmd_set, spec.cmd_id, payload, now=self._now(), mode=SessionMode.NO_ACK
-        )
+        sent = self._sessions.send(*spec.set_and_id, payload, now=self._now(), mode=SessionMode.NO_ACK)
         self._write(sent.frame)
 
     async def command(self, name: str, fields: Mapping[str, Any] | None = None) -> cmds.Message:
@@ -414,19 +413,18 @@ class AircraftAdapter(SupervisedAdapter):
             payload = cmds.encode_request(name, fields, self.fw)
         except LayoutError as exc:
             raise InvalidParameters(f"{name}: {exc}") from None
-        if spec.session == SessionMode.NO_ACK or not spec.ack:
+        if spec.delivery.session == SessionMode.NO_ACK or not spec.reply:
             self._fire(name, fields or {})
-            return cmds.Message(name, spec.cmd_set, spec.cmd_id, True, {})
+            return cmds.Message(name, spec.cmd_set, spec.cmd_id, {}, is_reply=True)
         fut: asyncio.Future[cmds.Message] = asyncio.get_running_loop().create_future()
         try:
             sent = self._sessions.send(
-                spec.cmd_set,
-                spec.cmd_id,
+                *spec.set_and_id,
                 payload,
                 now=self._now(),
-                mode=spec.session,
-                timeout=spec.timeout,
-                retries=spec.retries,
+                mode=SessionMode(spec.delivery.session),
+                timeout=spec.delivery.timeout,
+                retries=spec.delivery.retries,
                 tag=(fut, name),
             )
         except SessionsExhausted:
@@ -1074,9 +1072,5 @@ _EXTENSION_CALLS: dict[str, Callable[[AircraftAdapter, Any], Awaitable[CallResul
     "x_osdk_authority_release": _ext_release,
 }
 
-_PUSHES: dict[str, Callable[[AircraftAdapter, Mapping[str, Any]], None]] = {
-    "flight_data_push": AircraftAdapter._on_flight_data,
-    "status_push": AircraftAdapter._on_status,
-    "event_push": AircraftAdapter._on_event,
-    "lost_authority_push": AircraftAdapter._on_lost_authority,
-}
+# push → handler, as the table's entries name them (a missing method fails here, at import)
+_PUSHES = bind_handlers(AircraftAdapter, cmds.COMMANDS)

@@ -23,21 +23,23 @@ Owns: payload layouts and their lookup. Must not know frames, links or clocks (s
 from __future__ import annotations
 
 import types
-from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 from adapters.errors import UnknownCommandError
 from adapters.osdk.protocol import SessionMode
 from adapters.osdk.subscription import ADD_PACKAGE, PACKAGE_DATA, PACKAGE_ID, RESET, SUBSCRIBE_ACK, VERIFY
-from adapters.osdk.telemetry import FlightDataCodec, check_firmware, examples_of
+from adapters.osdk.telemetry import FIRMWARES, FlightDataCodec, check_firmware, examples_of
 from adapters.wire.bits import BitLayout, Bits
 from adapters.wire.layout import Field, Layout, LayoutError, PayloadCodec, Tail
+from adapters.wire.table import EMPTY, CommandSpec, Delivery, Message, Table, TaggedUnion, sizes_text
 
 __all__ = [
     "ACTIVATION_ACK",
     "ARM_ACK",
     "BY_NAME",
+    "COMMANDS",
     "COMMAND_NAMES",
     "CONTROL_ACK",
     "EMERGENCY_BRAKE_FLAG",
@@ -58,7 +60,7 @@ __all__ = [
     "DroneVersion",
     "FirmwareCodes",
     "Message",
-    "Union",
+    "TaggedUnion",
     "ack_text",
     "control_flag",
     "decode_ack",
@@ -72,8 +74,6 @@ __all__ = [
     "specs_at",
     "split_control_flag",
 ]
-
-_EMPTY: Mapping[Any, Any] = types.MappingProxyType({})
 
 TO_FC = "to_fc"  # onboard computer -> flight controller
 FROM_FC = "from_fc"  # flight controller -> onboard computer (pushes)
@@ -311,84 +311,8 @@ HOVER_FLAG = control_flag(HORIZONTAL_VELOCITY, VERTICAL_VELOCITY, YAW_RATE, FRAM
 EMERGENCY_BRAKE_FLAG = 0x48
 
 
-# --------------------------------------------------------------------------------------------------
-# Union payloads (one struct size, shape chosen by the first byte)
-
-
-def _names(codec: PayloadCodec) -> list[str]:
-    if isinstance(codec, BitLayout):
-        return codec.field_names
-    if isinstance(codec, Layout):
-        return [f.name for f in codec.fields] + ([codec.tail.name] if codec.tail else [])
-    return []
-
-
-class Union:
-    """A payload whose shape is chosen by its first byte (``selector``, a u8 that every shape starts
-    with): seed 004's mission status and event pushes. Values without a case use ``default``."""
-
-    __slots__ = ("cases", "default", "default_keys", "selector")
-
-    def __init__(
-        self,
-        selector: str,
-        cases: Mapping[int, tuple[PayloadCodec, ...]],
-        default: tuple[PayloadCodec, ...] = (),
-        default_keys: tuple[int, ...] = (),
-    ) -> None:
-        self.selector = selector
-        self.cases = dict(cases)
-        self.default = default
-        self.default_keys = default_keys  # the documented values the default shape is for
-
-    @property
-    def size(self) -> int | None:
-        sizes = {c.size for cs in (*self.cases.values(), self.default) for c in cs}
-        return sizes.pop() if len(sizes) == 1 else None
-
-    def _codecs(self, key: Any) -> tuple[PayloadCodec, ...]:
-        codecs = self.cases.get(key, self.default)
-        if not codecs:
-            raise LayoutError(f"unknown {self.selector} {key!r}; known: {sorted(self.cases)}")
-        return codecs
-
-    def decode(self, data: bytes) -> dict[str, Any]:
-        if not data:
-            raise LayoutError(f"empty payload: no {self.selector}")
-        codecs = self._codecs(data[0])
-        for c in codecs:
-            if c.size is None or c.size == len(data):
-                return c.decode(data)
-        raise LayoutError(
-            f"{self.selector} {data[0]}: payload is {len(data)} bytes, expected {_sizes_text(codecs)}"
-        )
-
-    def encode(self, values: Mapping[str, Any]) -> bytes:
-        if self.selector not in values:
-            raise LayoutError(f"{self.selector} is required to choose the payload shape")
-        codecs = self._codecs(values[self.selector])
-        keys = set(values)
-        exact = [c for c in codecs if set(_names(c)) == keys]
-        covering = [c for c in codecs if keys <= set(_names(c))]
-        return (exact or covering or list(codecs))[0].encode(values)
-
-    def example(self) -> dict[str, Any]:
-        return self.examples()[0]
-
-    def examples(self) -> list[dict[str, Any]]:
-        out: list[dict[str, Any]] = []
-        shapes = [(k, cs) for k, cs in self.cases.items()] + [(k, self.default) for k in self.default_keys]
-        for key, codecs in shapes:
-            for c in codecs:
-                ex = dict(c.example())
-                ex[self.selector] = key
-                out.append(c.decode(c.encode(ex)))
-        return out
-
-
-def _sizes_text(codecs: Iterable[PayloadCodec]) -> str:
-    sizes = [c.size for c in codecs]
-    return " or ".join("variable" if s is None else f"{s}" for s in sizes) + " bytes"
+# Union payloads (one struct size, shape chosen by the first byte) are adapters.wire.table.TaggedUnion
+# without a head: the tag is the first byte of every shape.
 
 
 # --------------------------------------------------------------------------------------------------
@@ -527,7 +451,7 @@ _ST_DEFAULT = BitLayout(
     ),
     (Bits("flags", (("is_broken", 1), ("reserved_1", 7))),),
 )
-STATUS_PUSH = Union(
+STATUS_PUSH = TaggedUnion(
     "mission_type",
     {1: (_ST_WAYPOINT,), 2: (_ST_HOTPOINT,), 3: (_ST_FOLLOW_ME,)},
     default=(_ST_DEFAULT,),
@@ -563,7 +487,9 @@ _EV_REACHED_FIELDS = (
 )
 _EV_REACHED_6 = Layout((*_EV_REACHED_FIELDS, _f("reserved_3", "B", "", "padding to the common 6 bytes")))
 _EV_REACHED_5 = Layout(_EV_REACHED_FIELDS)
-EVENT_PUSH = Union("incident_type", {0: (_EV_UPLOAD,), 1: (_EV_FINISH,), 2: (_EV_REACHED_6, _EV_REACHED_5)})
+EVENT_PUSH = TaggedUnion(
+    "incident_type", {0: (_EV_UPLOAD,), 1: (_EV_FINISH,), 2: (_EV_REACHED_6, _EV_REACHED_5)}
+)
 
 # Activation set 0x00 (PROTOCOL-NOTES "Activation and version").
 ACTIVATE = Layout(
@@ -737,35 +663,37 @@ GO_HOME_ALTITUDE_ACKS = (
 # The table
 
 
-@dataclass(frozen=True, slots=True)
-class CommandSpec:
-    """One command (or push) on the wire.
+def _spec(
+    name: str,
+    cmd_set: int,
+    cmd_id: int,
+    request: tuple[PayloadCodec, ...],
+    ack: tuple[PayloadCodec, ...] = (),
+    ack_codes: Mapping[int, str] = EMPTY,
+    *,
+    direction: str = TO_FC,
+    session: SessionMode = SessionMode.ACK_REQUIRED,
+    timeout: float = 0.5,
+    retries: int = 2,
+    firmware: str | None = None,
+    defaults: Mapping[str, Any] = EMPTY,
+    fixed: Mapping[str, Any] = EMPTY,
+    section: str = "",
+    doc: str = "",
+    handler: str = "",
+) -> CommandSpec:
+    """One table entry (:class:`adapters.wire.table.CommandSpec`) in this table's terms.
 
     ``request`` layouts: the first is what we encode, any decodes (chosen by size). ``ack`` layouts
     likewise; empty means the command takes no ACK. ``session`` is what a sender uses (0 none, 1
     tolerant, 2 = a free session 2..31, resent ``retries`` times ``timeout`` seconds apart).
     ``defaults`` fill missing request fields; ``fixed`` values are forced on encode and must match on
-    decode (a preset of a shared id). ``firmware`` None means both generations."""
-
-    name: str
-    cmd_set: int
-    cmd_id: int
-    request: tuple[PayloadCodec, ...]
-    ack: tuple[PayloadCodec, ...] = ()
-    ack_codes: Mapping[int, str] = field(default_factory=lambda: _EMPTY)
-    direction: str = TO_FC
-    session: SessionMode = SessionMode.ACK_REQUIRED
-    timeout: float = 0.5
-    retries: int = 2
-    firmware: str | None = None
-    defaults: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
-    fixed: Mapping[str, Any] = field(default_factory=lambda: _EMPTY)
-    section: str = ""
-    doc: str = ""
-
-    @property
-    def key(self) -> tuple[int, int]:
-        return (self.cmd_set, self.cmd_id)
+    decode (a preset of a shared id). ``firmware`` (the table's variant) None means both generations;
+    ``handler`` the adapter method that takes the push."""
+    return CommandSpec(
+        name, cmd_set, cmd_id, request, ack, ack_codes, direction, firmware, defaults, fixed, section, doc,
+        Delivery(int(session), timeout, retries), handler=handler,
+    )  # fmt: skip
 
 
 def _gs(
@@ -778,7 +706,7 @@ def _gs(
     """A seed 004 ground-station command: session 2, 500 ms x 2 retries (OSDK mission timing)."""
     requests = request if isinstance(request, tuple) else (request,)
     section = f"seed 004 0x03,0x{cmd_id:02X}"
-    return CommandSpec(name, 0x03, cmd_id, requests, ack, GS_ACK_TEXT, section=section, doc=doc)
+    return _spec(name, 0x03, cmd_id, requests, ack, GS_ACK_TEXT, section=section, doc=doc)
 
 
 _NOTES_ACT = "PROTOCOL-NOTES Activation and version"
@@ -788,102 +716,105 @@ _OSDK_SUB = "OSDK 3.9.0 dji_subscription.cpp"
 # fmt: off
 _SPECS: tuple[CommandSpec, ...] = (
     # ---- activation set 0x00
-    CommandSpec(
+    _spec(
         "get_version", 0x00, 0x00, (ARBITRARY,), (VERSION_REPLY,), VERSION_ACK,
         timeout=1.0, retries=3, section=_NOTES_ACT, doc="protocol version and activation state",
     ),
-    CommandSpec(
+    _spec(
         "activate", 0x00, 0x01, (ACTIVATE,), (U16_ACK,), ACTIVATION_ACK, timeout=1.0, retries=3,
         defaults=types.MappingProxyType({"api_level": 2, "bundle_id": b"0" * 32}),
         section=_NOTES_ACT, doc="44 bytes; other command sets work only after activation",
     ),
-    CommandSpec(
+    _spec(
         "set_broadcast_frequency", 0x00, 0x10, (BROADCAST_FREQUENCY,), (U16_ACK,), FREQUENCY_ACK,
         timeout=0.1, retries=1, section=_NOTES_CTL, doc="byte i = rate code of flight-data item i",
     ),
     # ---- control set 0x01
-    CommandSpec(
+    _spec(
         "obtain_control", 0x01, 0x00, (OBTAIN_CONTROL,), (U16_ACK,), CONTROL_ACK,
         section=_NOTES_CTL, doc="priority RC > mobile > onboard",
     ),
-    CommandSpec(
+    _spec(
         "flight_task", 0x01, 0x01, (FLIGHT_TASK,), (U16_ACK,), FLIGHT_TASK_ACK, firmware="new",
         section=_NOTES_CTL, doc="takeoff, landing, go home, motors",
     ),
-    CommandSpec(
+    _spec(
         "flight_task", 0x01, 0x01, (FLIGHT_TASK_M100,), (U16_ACK,), FLIGHT_TASK_M100_ACK, firmware="m100",
         section=_NOTES_CTL, doc="legacy M100 form: {cmd sequence, code}",
     ),
-    CommandSpec(
+    _spec(
         "movement_control", 0x01, 0x03, (MOVEMENT,), session=SessionMode.NO_ACK, retries=0,
         section=_NOTES_CTL, doc="virtual stick; stream at up to 50 Hz, no ACK, no hold time",
     ),
-    CommandSpec(
+    _spec(
         "emergency_brake", 0x01, 0x03, (ADVANCED_MOVEMENT,), session=SessionMode.NO_ACK, retries=0,
         firmware="new", fixed=EMERGENCY_BRAKE_VALUES, section=_NOTES_CTL,
         doc="advanced movement preset 48 01 + six f32 zeros (new FW >= 3.2.36.6)",
     ),
-    CommandSpec(
+    _spec(
         "advanced_movement_control", 0x01, 0x03, (ADVANCED_MOVEMENT,), session=SessionMode.NO_ACK,
         retries=0, firmware="new", section="OSDK Control::AdvancedCtrlData",
         doc="26-byte movement control with feed-forward (any flag other than the brake preset)",
     ),
     # ACK width not confirmed: the notes give the codes only; u16 like the rest of the control set.
-    CommandSpec("arm", 0x01, 0x05, (ARM,), (U16_ACK,), ARM_ACK, section=_NOTES_CTL, doc="arm/disarm motors"),
-    CommandSpec(
+    _spec("arm", 0x01, 0x05, (ARM,), (U16_ACK,), ARM_ACK, section=_NOTES_CTL, doc="arm/disarm motors"),
+    _spec(
         "kill_switch", 0x01, 0x06, (KILL_SWITCH,), (U16_ACK,), firmware="new", section=_NOTES_CTL,
         doc="FW >= 3.3; stops motors: a last resort, never on a mere link loss",
     ),
-    CommandSpec(
+    _spec(
         "go_home_altitude_write", 0x01, 0x42, (GO_HOME_ALTITUDE_WRITE,), GO_HOME_ALTITUDE_ACKS, PARAM_ACK,
         firmware="new", fixed=types.MappingProxyType({"hash": GO_HOME_ALTITUDE_HASH}),
         section="OSDK 3.9 dji_flight_assistant_module (parameterWrite 0x01 0x42)",
         doc="go-home altitude (m above take-off), 20..500; ACK {ret, hash, value now held}",
     ),
     # ---- push set 0x02 (from the flight controller)
-    CommandSpec(
+    _spec(
         "flight_data_push", 0x02, 0x00, (FlightDataCodec("new"),), direction=FROM_FC,
         session=SessionMode.NO_ACK, retries=0, firmware="new", section=_NOTES_CTL,
-        doc="u16 bitmap + present items (telemetry.py)",
+        doc="u16 bitmap + present items (telemetry.py)", handler="_on_flight_data",
     ),
-    CommandSpec(
+    _spec(
         "flight_data_push", 0x02, 0x00, (FlightDataCodec("m100"),), direction=FROM_FC,
         session=SessionMode.NO_ACK, retries=0, firmware="m100", section=_NOTES_CTL,
-        doc="u16 bitmap + present items, M100 layout (telemetry.py)",
+        doc="u16 bitmap + present items, M100 layout (telemetry.py)", handler="_on_flight_data",
     ),
     # The FC picks the session; when it is > 0 the onboard side ACKs with 00 00 (same session and seq).
-    CommandSpec(
+    _spec(
         "lost_authority_push", 0x02, 0x01, (LOST_AUTHORITY,), (U16_ACK,), LOST_AUTHORITY_ACK,
         direction=FROM_FC, defaults=types.MappingProxyType({"reason": 4}), section=_NOTES_CTL,
         doc="RC or mobile app took over: end DRC motion (joystick_invalid_notify reason 4)",
+        handler="_on_lost_authority",
     ),
-    CommandSpec(
+    _spec(
         "subscription_data_push", 0x02, 0x05, (PACKAGE_DATA,), direction=FROM_FC,
         session=SessionMode.NO_ACK, retries=0, firmware="new", section=_OSDK_SUB,
         doc="one subscribed package: u8 id + its topics' structs (subscription.decode_package)",
     ),
-    CommandSpec(
+    _spec(
         "status_push", 0x02, 0x03, (STATUS_PUSH,), direction=FROM_FC, session=SessionMode.NO_ACK,
         retries=0, section="seed 004 0x02,0x03", doc="current mission status, shape by mission_type",
+        handler="_on_status",
     ),
-    CommandSpec(
+    _spec(
         "event_push", 0x02, 0x04, (EVENT_PUSH,), direction=FROM_FC, session=SessionMode.NO_ACK,
         retries=0, section="seed 004 0x02,0x04", doc="waypoint mission event, shape by incident_type",
+        handler="_on_event",
     ),
     # ---- data subscription set 0x0B (firmware 3.3+; subscription.py), OSDK's timing: 500 ms x 2 / x 1
-    CommandSpec(
+    _spec(
         "subscribe_verify", 0x0B, 0x00, (VERIFY,), (U8_ACK,), SUBSCRIBE_ACK, firmware="new",
         section=_OSDK_SUB, doc="match the topic database version (0x00000100)",
     ),
-    CommandSpec(
+    _spec(
         "subscribe_add_package", 0x0B, 0x01, (ADD_PACKAGE,), (U8_ACK,), SUBSCRIBE_ACK, retries=1,
         firmware="new", section=_OSDK_SUB, doc="start pushing package 0..4: its rate and topic UIDs",
     ),
-    CommandSpec(
+    _spec(
         "subscribe_reset", 0x0B, 0x02, (RESET,), (U8_ACK,), SUBSCRIBE_ACK, retries=1,
         firmware="new", section=_OSDK_SUB, doc="remove every package",
     ),
-    CommandSpec(
+    _spec(
         "subscribe_remove_package", 0x0B, 0x03, (PACKAGE_ID,), (U8_ACK,), SUBSCRIBE_ACK, retries=1,
         firmware="new", section=_OSDK_SUB, doc="stop one package",
     ),
@@ -944,7 +875,7 @@ _SPECS: tuple[CommandSpec, ...] = (
     _gs(0x30, "fm_upload_start", FM_SETTING, (U8_ACK,), "upload and start follow me"),
     _gs(0x31, "fm_stop", ARBITRARY, (U8_ACK,), "stop follow me"),
     _gs(0x32, "fm_pause_resume", Layout((_f("pause", "B", "", "0 pause, 1 resume"),)), (U8_ACK,), "pause"),
-    CommandSpec(
+    _spec(
         "fm_update_target", 0x03, 0x33, (FM_TARGET,), session=SessionMode.NO_ACK, retries=0,
         section="seed 004 0x03,0x33", doc="target position; NO ACK",
     ),
@@ -952,83 +883,43 @@ _SPECS: tuple[CommandSpec, ...] = (
 # fmt: on
 
 
-def _group(specs: Iterable[CommandSpec]) -> dict[tuple[int, int], tuple[CommandSpec, ...]]:
-    out: dict[tuple[int, int], tuple[CommandSpec, ...]] = {}
-    for s in specs:
-        out[s.key] = (*out.get(s.key, ()), s)
-    return out
-
-
 # THE table: (cmd_set, cmd_id) -> the specs sharing that id, in decode-preference order.
-TABLE: dict[tuple[int, int], tuple[CommandSpec, ...]] = _group(_SPECS)
-BY_NAME: dict[str, tuple[CommandSpec, ...]] = {}
-for _s in _SPECS:
-    BY_NAME[_s.name] = (*BY_NAME.get(_s.name, ()), _s)
-COMMAND_NAMES: tuple[str, ...] = tuple(BY_NAME)
+COMMANDS = Table(_SPECS, variants=FIRMWARES, variant_noun="firmware")
+TABLE = COMMANDS.by_key
+BY_NAME = COMMANDS.by_name
+COMMAND_NAMES: tuple[str, ...] = COMMANDS.names
 
 
 # --------------------------------------------------------------------------------------------------
 # Lookup, encode, decode
 
 
-@dataclass(frozen=True, slots=True)
-class Message:
-    """A decoded command, push or ACK payload (wire units)."""
-
-    name: str
-    cmd_set: int
-    cmd_id: int
-    is_ack: bool
-    fields: dict[str, Any]
-
-
-def _fits(spec: CommandSpec, firmware: str) -> bool:
-    return spec.firmware is None or spec.firmware == firmware
-
-
 def spec_for(name: str, firmware: str = "new") -> CommandSpec:
     """The spec of a command name for this firmware, or :class:`UnknownCommandError` listing the names."""
-    check_firmware(firmware)
-    for spec in BY_NAME.get(name, ()):
-        if _fits(spec, firmware):
-            return spec
-    if name in BY_NAME:
-        raise UnknownCommandError(f"command {name!r} does not exist on firmware {firmware!r}")
-    raise UnknownCommandError(f"unknown command {name!r}; valid: {', '.join(COMMAND_NAMES)}")
+    return COMMANDS.named(name, check_firmware(firmware))
 
 
 def specs_at(cmd_set: int, cmd_id: int, firmware: str = "new") -> tuple[CommandSpec, ...]:
-    check_firmware(firmware)
-    return tuple(s for s in TABLE.get((cmd_set, cmd_id), ()) if _fits(s, firmware))
-
-
-def _encode(spec: CommandSpec, codec: PayloadCodec, fields: Mapping[str, Any] | None) -> bytes:
-    fields = dict(fields or {})
-    values = {**spec.defaults, **fields}
-    for k, v in spec.fixed.items():
-        if k in fields and fields[k] != v:
-            raise LayoutError(f"{spec.name}: {k} is fixed at {v!r}")
-        values[k] = v
-    return codec.encode(values)
+    return COMMANDS.at((cmd_set, cmd_id), check_firmware(firmware))
 
 
 def encode_request(name: str, fields: Mapping[str, Any] | None = None, firmware: str = "new") -> bytes:
     """The payload (after CmdSet/CmdID) of command ``name``: missing fields take the spec's defaults,
     then zero. Raises :class:`UnknownCommandError` or :class:`LayoutError` (unknown field, out of range)."""
     spec = spec_for(name, firmware)
-    return _encode(spec, spec.request[0], fields)
+    return spec.request[0].encode(spec.values(fields))
 
 
 def encode_ack_payload(name: str, fields: Mapping[str, Any] | None = None, firmware: str = "new") -> bytes:
     """The raw ACK value answering command ``name`` (what an ACK frame's data holds)."""
     spec = spec_for(name, firmware)
-    if not spec.ack:
+    if not spec.reply:
         raise LayoutError(f"{name} takes no ACK")
-    return spec.ack[0].encode(dict(fields or {}))
+    return spec.reply[0].encode(dict(fields or {}))
 
 
 def _decode_with(
-    codecs: tuple[PayloadCodec, ...], data: bytes, fixed: Mapping[str, Any] = _EMPTY
+    codecs: tuple[PayloadCodec, ...], data: bytes, fixed: Mapping[str, Any] = EMPTY
 ) -> dict[str, Any] | None:
     """The first layout that has the payload's size, decodes it and matches the fixed values."""
     for codec in codecs:
@@ -1052,8 +943,8 @@ def decode_request(cmd_set: int, cmd_id: int, payload: bytes, firmware: str = "n
     for spec in specs:
         fields = _decode_with(spec.request, bytes(payload), spec.fixed)
         if fields is not None:
-            return Message(spec.name, cmd_set, cmd_id, False, fields)
-    wants = "; ".join(f"{s.name}: {_sizes_text(s.request)}" for s in specs)
+            return Message(spec.name, cmd_set, cmd_id, fields)
+    wants = "; ".join(f"{s.name}: {sizes_text(s.request)}" for s in specs)
     detail = ""
     for spec in specs:  # say why a size match still failed (bad selector, bitmap/length mismatch)
         for codec in spec.request:
@@ -1070,14 +961,14 @@ def decode_request(cmd_set: int, cmd_id: int, payload: bytes, firmware: str = "n
 def decode_ack(name: str, data: bytes, firmware: str = "new") -> Message:
     """Decode the raw ACK value of a frame already matched to command ``name``."""
     spec = spec_for(name, firmware)
-    if not spec.ack:
+    if not spec.reply:
         raise LayoutError(f"{name} takes no ACK")
-    fields = _decode_with(spec.ack, bytes(data))
+    fields = _decode_with(spec.reply, bytes(data))
     if fields is None:
-        raise LayoutError(f"{name} ACK of {len(data)} bytes, expected {_sizes_text(spec.ack)}")
-    return Message(spec.name, spec.cmd_set, spec.cmd_id, True, fields)
+        raise LayoutError(f"{name} ACK of {len(data)} bytes, expected {sizes_text(spec.reply)}")
+    return Message(spec.name, spec.cmd_set, spec.cmd_id, fields, is_reply=True)
 
 
 def ack_text(spec: CommandSpec, code: int) -> str | None:
     """The documented meaning of an ACK code for this command, if any."""
-    return spec.ack_codes.get(code)
+    return spec.reply_codes.get(code)

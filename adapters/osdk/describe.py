@@ -19,7 +19,7 @@ from adapters.osdk import protocol
 from adapters.osdk.commands import (
     COMMAND_NAMES,
     CommandSpec,
-    Union,
+    TaggedUnion,
     ack_text,
     decode_ack,
     decode_request,
@@ -117,7 +117,7 @@ def decode_bytes(data: bytes, **options: Any) -> list[dict[str, Any]]:
             d["error"], d["payload"] = str(exc), item.payload.hex()
         else:
             d["command"], d["fields"] = msg.name, jsonable(msg.fields)
-            if item.session >= 1 and spec_for(msg.name, firmware).ack:
+            if item.session >= 1 and spec_for(msg.name, firmware).reply:
                 awaiting[(item.session, item.seq)] = msg.name
         out.append(d)
     return out
@@ -130,8 +130,8 @@ def _bytes_fields(codec: PayloadCodec) -> set[str]:
     if isinstance(codec, Layout):
         names = {f.name for f in codec.fields if f.code == "s"}
         return names | ({codec.tail.name} if codec.tail else set())
-    if isinstance(codec, Union):
-        return {n for cs in (*codec.cases.values(), codec.default) for c in cs for n in _bytes_fields(c)}
+    if isinstance(codec, TaggedUnion):
+        return {n for cs in (*codec.arms.values(), codec.default) for c in cs for n in _bytes_fields(c)}
     if isinstance(codec, FlightDataCodec):
         return {"unknown"}
     return set()
@@ -156,13 +156,13 @@ def encode_command(command: str, seq: int, fields: dict[str, Any], **options: An
     firmware = check_firmware(options.get("firmware", "new"))
     spec = spec_for(command, firmware)
     if options.get("ack"):
-        if not spec.ack:
+        if not spec.reply:
             raise ValueError(f"{command} takes no ACK")
-        payload = encode_ack_payload(command, _from_hex(spec.ack[0], fields), firmware)
+        payload = encode_ack_payload(command, _from_hex(spec.reply[0], fields), firmware)
         return protocol.encode_ack(int(options.get("session", 2)), seq, payload)
     payload = encode_request(command, _from_hex(spec.request[0], fields), firmware)
-    session = int(options.get("session", int(spec.session)))
-    return protocol.encode_command(spec.cmd_set, spec.cmd_id, payload, session, seq)
+    session = int(options.get("session", int(spec.delivery.session)))
+    return protocol.encode_command(*spec.set_and_id, payload, session, seq)
 
 
 # -- the console's frame inspector (gateway/web/frames.py) -------------------------------------------

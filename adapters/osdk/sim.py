@@ -510,9 +510,7 @@ class OsdkFcModel:
     def _push(self, name: str, fields: Mapping[str, Any], now: float) -> None:
         spec = cmds.spec_for(name, self.firmware)
         payload = cmds.encode_request(name, fields, self.firmware)
-        self._emit(
-            self._table.send(spec.cmd_set, spec.cmd_id, payload, now=now, mode=SessionMode.NO_ACK).frame, now
-        )
+        self._emit(self._table.send(*spec.set_and_id, payload, now=now, mode=SessionMode.NO_ACK).frame, now)
 
     # -- protocol ----------------------------------------------------------------------------------
     def handle(self, frame: Frame, now: float) -> None:
@@ -544,7 +542,7 @@ class OsdkFcModel:
         if not self.activated and cmd_set != 0x00:
             # Real FCs refuse with the common ACK "no authorization" (module docstring).
             self.refused_not_activated += 1
-            if frame.session and specs[0].ack and self.unactivated == "ack":
+            if frame.session and specs[0].reply and self.unactivated == "ack":
                 self._ack(frame, NOT_ACTIVATED_ACK.to_bytes(2, "little"), now)
             return
         try:
@@ -552,8 +550,8 @@ class OsdkFcModel:
         except LayoutError:
             self.bad_payloads += 1
             code = _BAD_PAYLOAD_ACK.get(specs[0].name, _GS_INVALID if cmd_set == 0x03 else None)
-            if frame.session and specs[0].ack and code is not None:
-                self._ack(frame, specs[0].ack[0].encode({"ack": code}), now)
+            if frame.session and specs[0].reply and code is not None:
+                self._ack(frame, specs[0].reply[0].encode({"ack": code}), now)
             return
         self.actions[msg.name] += 1
         try:
