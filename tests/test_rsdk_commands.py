@@ -18,7 +18,7 @@ from adapters.rsdk.commands import (
     COMMANDS,
     RETURN_CODES,
     TABLE,
-    Command,
+    CommandSpec,
     Message,
     TaggedUnion,
     TlvCodec,
@@ -30,6 +30,7 @@ from adapters.rsdk.commands import (
     payload_examples,
     return_code_text,
     version_text,
+    wants_reply,
 )
 from adapters.rsdk.protocol import Decoder, Frame, encode
 from adapters.wire.layout import Field, Layout
@@ -105,14 +106,14 @@ def test_entries_are_declared_completely() -> None:
             assert spec.key == key
             assert re.fullmatch(r"2\.3\.[45]\.\d+", spec.section), spec.name
             assert spec.direction
-    assert {n for n, s in BY_NAME.items() if s.reply is None} == NO_REPLY
+    assert {n for n, s in BY_NAME.items() if not s.reply} == NO_REPLY
 
 
 def _layouts(codec: Any) -> list[Layout]:
     if isinstance(codec, Layout):
         return [codec]
     if isinstance(codec, TaggedUnion):
-        return [codec.head, *codec.arms.values()]
+        return [codec.head, *(a for arm in codec.arms.values() for a in arm)]
     if isinstance(codec, TlvCodec):
         return [codec.head, *(p.value for p in codec.params.values())]
     raise AssertionError(codec)
@@ -120,8 +121,9 @@ def _layouts(codec: Any) -> list[Layout]:
 
 def test_every_reply_starts_with_return_code() -> None:
     for spec in BY_NAME.values():
-        if spec.reply is not None:
-            head = spec.reply.head if isinstance(spec.reply, TaggedUnion | TlvCodec) else spec.reply
+        if spec.reply:
+            reply = spec.reply[0]
+            head = reply.head if isinstance(reply, TaggedUnion | TlvCodec) else reply
             assert head.fields[0].name == "return_code", spec.name
 
 
@@ -129,20 +131,19 @@ def test_field_names_are_snake_case_and_typos_fixed() -> None:
     names = {
         f.name
         for s in BY_NAME.values()
-        for c in (s.command, s.reply)
-        if c
+        for c in (*s.request, *s.reply)
         for lay in _layouts(c)
         for f in lay.fields
     }
     assert all(re.fullmatch(r"[a-z][a-z0-9_]*", n) for n in names), names
     assert not any("agnle" in n for n in names)
-    push = BY_NAME["param_push"].command
+    push = BY_NAME["param_push"].request[0]
     assert isinstance(push, Layout) and push.size == 22  # 40-byte frame
     assert [f.name for f in push.fields][4:7] == ["yaw_joint_angle", "roll_joint_angle", "pitch_joint_angle"]
 
 
 def test_seed_ranges() -> None:
-    pos = BY_NAME["position_control"].command
+    pos = BY_NAME["position_control"].request[0]
     assert isinstance(pos, Layout)
     r = {f.name: (f.minimum, f.maximum) for f in pos.fields}
     assert (
@@ -176,33 +177,33 @@ def test_seed_sample_from_table() -> None:
 
 
 @pytest.mark.parametrize(("spec", "fields"), matrix(reply=False))
-def test_command_round_trip(spec: Command, fields: dict[str, Any]) -> None:
+def test_command_round_trip(spec: CommandSpec, fields: dict[str, Any]) -> None:
     frame = decode_one(encode_command(spec.name, 0x1234, fields))
     assert frame.seq == 0x1234 and not frame.is_reply and frame.key == spec.key
-    assert frame.cmd_type == (0x03 if spec.wants_reply(fields) else 0x00)
-    assert decode_message(frame) == Message(spec.name, spec.cmd_set, spec.cmd_id, False, fields)
+    assert frame.cmd_type == (0x03 if wants_reply(spec, fields) else 0x00)
+    assert decode_message(frame) == Message(spec.name, spec.cmd_set, spec.cmd_id, fields)
 
 
 @pytest.mark.parametrize(("spec", "fields"), matrix(reply=True))
-def test_reply_round_trip_latest(spec: Command, fields: dict[str, Any]) -> None:
+def test_reply_round_trip_latest(spec: CommandSpec, fields: dict[str, Any]) -> None:
     raw = encode_command(spec.name, 0x0102, fields, reply=True)
     assert raw[3] & 0x20
     frame = decode_one(raw)
     assert frame.is_reply and frame.key == spec.key
     msg = decode_reply(frame, spec.cmd_set, spec.cmd_id, spec.name)
-    assert msg == Message(spec.name, spec.cmd_set, spec.cmd_id, True, fields, legacy=False)
+    assert msg == Message(spec.name, spec.cmd_set, spec.cmd_id, fields, is_reply=True, legacy=False)
     plain = decode_message(frame)  # without context: latest format, first entry at the key
     assert plain.fields == fields and plain.name in {e.name for e in TABLE[spec.key]}
 
 
 @pytest.mark.parametrize(("spec", "fields"), matrix(reply=True))
-def test_reply_round_trip_legacy(spec: Command, fields: dict[str, Any]) -> None:
+def test_reply_round_trip_legacy(spec: CommandSpec, fields: dict[str, Any]) -> None:
     latest = encode_command(spec.name, 9, fields, reply=True)
     raw = encode_command(spec.name, 9, fields, reply=True, legacy=True)
     assert len(raw) == len(latest) - 2
     frame = decode_one(raw)
     msg = decode_reply(frame, spec.cmd_set, spec.cmd_id, spec.name)
-    assert msg == Message(spec.name, spec.cmd_set, spec.cmd_id, True, fields, legacy=True)
+    assert msg == Message(spec.name, spec.cmd_set, spec.cmd_id, fields, is_reply=True, legacy=True)
     with pytest.raises(CommandError):
         decode_message(frame)  # no CmdSet/CmdID: needs the sent command
 
@@ -239,7 +240,7 @@ def codec_st(codec: Any) -> st.SearchStrategy[dict[str, Any]]:
     if isinstance(codec, TaggedUnion):
         return st.one_of(
             *(
-                st.tuples(_layout_st(codec.head), _layout_st(arm)).map(
+                st.tuples(_layout_st(codec.head), _layout_st(arm[0])).map(
                     lambda t, tag=tag: {**t[0], codec.tag: tag, **t[1]}
                 )
                 for tag, arm in codec.arms.items()
@@ -256,19 +257,19 @@ def codec_st(codec: Any) -> st.SearchStrategy[dict[str, Any]]:
 
 
 @st.composite
-def table_case(draw: st.DrawFn) -> tuple[Command, bool, dict[str, Any]]:
+def table_case(draw: st.DrawFn) -> tuple[CommandSpec, bool, dict[str, Any]]:
     spec = draw(st.sampled_from(list(BY_NAME.values())))
-    reply = spec.reply is not None and draw(st.booleans())
-    codec = spec.reply if reply else spec.command
+    reply = bool(spec.reply) and draw(st.booleans())
+    codec = spec.reply[0] if reply else spec.request[0]
     fields = draw(codec_st(codec))
     if not reply:
-        fields = {**fields, **spec.when}
+        fields = {**fields, **spec.fixed}
     return spec, reply, fields
 
 
 @given(table_case(), st.integers(0, 0xFFFF), st.booleans())
 def test_table_round_trip_hypothesis(
-    case: tuple[Command, bool, dict[str, Any]], seq: int, legacy: bool
+    case: tuple[CommandSpec, bool, dict[str, Any]], seq: int, legacy: bool
 ) -> None:
     spec, reply, fields = case
     raw = encode_command(spec.name, seq, fields, reply=reply, legacy=reply and legacy)
@@ -341,7 +342,7 @@ def test_version_query_vs_push_by_length() -> None:
 def test_recenter_vs_follow_mode() -> None:
     raw = encode_command("recenter_selfie", 1, {"recenter_and_selfie_command": 1})  # operating_mode filled
     assert decode_message(decode_one(raw)) == Message(
-        "recenter_selfie", 0x0E, 0x0E, False, {"operating_mode": 0xFE, "recenter_and_selfie_command": 1}
+        "recenter_selfie", 0x0E, 0x0E, {"operating_mode": 0xFE, "recenter_and_selfie_command": 1}
     )
     raw = encode_command("follow_mode", 1, {"operating_mode": 3, "recenter_and_selfie_command": 0})
     assert decode_message(decode_one(raw)).name == "follow_mode"

@@ -1073,4 +1073,4 @@ _EXTENSION_CALLS: dict[str, Callable[[AircraftAdapter, Any], Awaitable[CallResul
 }
 
 # push → handler, as the table's entries name them (a missing method fails here, at import)
-_PUSHES = bind_handlers(AircraftAdapter, cmds.COMMANDS)
+_PUSHES = bind_handlers(AircraftAdapter, cmds.COMMAND_TABLE)

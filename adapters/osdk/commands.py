@@ -39,8 +39,8 @@ __all__ = [
     "ACTIVATION_ACK",
     "ARM_ACK",
     "BY_NAME",
-    "COMMANDS",
     "COMMAND_NAMES",
+    "COMMAND_TABLE",
     "CONTROL_ACK",
     "EMERGENCY_BRAKE_FLAG",
     "FIRMWARE_CODES",
@@ -884,10 +884,10 @@ _SPECS: tuple[CommandSpec, ...] = (
 
 
 # THE table: (cmd_set, cmd_id) -> the specs sharing that id, in decode-preference order.
-COMMANDS = Table(_SPECS, variants=FIRMWARES, variant_noun="firmware")
-TABLE = COMMANDS.by_key
-BY_NAME = COMMANDS.by_name
-COMMAND_NAMES: tuple[str, ...] = COMMANDS.names
+COMMAND_TABLE = Table(_SPECS, variants=FIRMWARES, variant_noun="firmware")
+TABLE = COMMAND_TABLE.by_key
+BY_NAME = COMMAND_TABLE.by_name
+COMMAND_NAMES: tuple[str, ...] = COMMAND_TABLE.names
 
 
 # --------------------------------------------------------------------------------------------------
@@ -896,11 +896,11 @@ COMMAND_NAMES: tuple[str, ...] = COMMANDS.names
 
 def spec_for(name: str, firmware: str = "new") -> CommandSpec:
     """The spec of a command name for this firmware, or :class:`UnknownCommandError` listing the names."""
-    return COMMANDS.named(name, check_firmware(firmware))
+    return COMMAND_TABLE.named(name, check_firmware(firmware))
 
 
 def specs_at(cmd_set: int, cmd_id: int, firmware: str = "new") -> tuple[CommandSpec, ...]:
-    return COMMANDS.at((cmd_set, cmd_id), check_firmware(firmware))
+    return COMMAND_TABLE.at((cmd_set, cmd_id), check_firmware(firmware))
 
 
 def encode_request(name: str, fields: Mapping[str, Any] | None = None, firmware: str = "new") -> bytes:

@@ -53,7 +53,16 @@ from adapters.errors import (
     MethodNotSupported,
 )
 from adapters.rsdk.can import Reassembler, segment
-from adapters.rsdk.commands import TABLE, Message, build_frame, decode_message, decode_reply, lookup
+from adapters.rsdk.commands import (
+    COMMAND_TABLE,
+    TABLE,
+    Message,
+    build_frame,
+    decode_message,
+    decode_reply,
+    lookup,
+    wants_reply,
+)
 from adapters.rsdk.config import RsdkDeviceSettings
 from adapters.rsdk.extensions import (
     AngleGet,
@@ -68,6 +77,7 @@ from adapters.rsdk.link import CanLink
 from adapters.rsdk.protocol import Frame, encode
 from adapters.supervision import SupervisedAdapter
 from adapters.wire.stream import DecoderStats
+from adapters.wire.table import bind_handlers
 from schemas.results import ResultCode
 from schemas.services import (
     CameraAim,
@@ -295,10 +305,9 @@ class GimbalAdapter(SupervisedAdapter):
             msg = decode_message(frame)
         except CommandError:
             return
-        if msg.name == "param_push":
-            self._on_push(msg.fields)
-        elif msg.name == "calibration_push":
-            self._on_calibration(msg.fields)
+        handler = _PUSHES.get(msg.name)
+        if handler is not None:
+            handler(self, msg.fields)
 
     def _on_unsolicited_reply(self, frame: Frame) -> None:
         """Replies to fire-and-forget commands (the start-up version query) still carry news; any
@@ -366,7 +375,7 @@ class GimbalAdapter(SupervisedAdapter):
         except CommandError as exc:
             raise InvalidParameters(str(exc)) from None
         fut: asyncio.Future[Message] = asyncio.get_running_loop().create_future()
-        self._pending[frame.seq] = _Pending(fut, spec.cmd_set, spec.cmd_id, name)
+        self._pending[frame.seq] = _Pending(fut, *spec.set_and_id, name)
         try:
             self._link.send(segment(encode(frame), self.settings.tx_id))
             return await self._clock.wait_for(fut, self.settings.request_timeout)
@@ -406,7 +415,7 @@ class GimbalAdapter(SupervisedAdapter):
         """One command: its reply checked (return code 0, else the result ``failure``), or for a command
         without a reply frame, its frames on the bus (None)."""
         spec = lookup(name)
-        if not spec.wants_reply({**spec.when, **fields}):
+        if not wants_reply(spec, {**spec.fixed, **fields}):
             await self.send_confirmed(name, fields)
             return None
         msg = await self.request(name, fields)
@@ -648,3 +657,7 @@ class GimbalAdapter(SupervisedAdapter):
         assert msg is not None  # get_version has a reply frame
         self._version_from(msg.fields)
         return CallResult(0, {"device_id": msg.fields["device_id"], "version": self.version})
+
+
+# push → handler, as the table's entries name them (a missing method fails here, at import)
+_PUSHES = bind_handlers(GimbalAdapter, COMMAND_TABLE)

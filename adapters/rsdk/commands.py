@@ -1,9 +1,10 @@
 """DJI R SDK command table (seed 000 §2.3): what each (CmdSet, CmdID) payload means.
 
 One declarative table, :data:`TABLE`, keyed by ``(cmd_set, cmd_id)``, covers every command of the
-seed's Figure 4 (0x0E 0x00..0x12, 0x0D 0x00..0x01). Each :class:`Command` names its command-frame
-payload, its reply payload (``None`` where the seed says there is no reply frame), direction, doc and
-seed section; field names, units and seed ranges live in the :class:`~adapters.wire.layout.Field`
+seed's Figure 4 (0x0E 0x00..0x12, 0x0D 0x00..0x01). Each entry (an
+:class:`adapters.wire.table.CommandSpec`) names its command-frame payload, its reply payload (none
+where the seed says there is no reply frame), direction, doc and seed section; field names, units and
+seed ranges live in the :class:`~adapters.wire.layout.Field`
 declarations. Two keys carry two entries (same CmdSet/CmdID, different meaning):
 
 * 0x0E 0x09: ``get_version`` (host asks, 4-byte device id; reply: return code, id, version) and
@@ -23,21 +24,23 @@ Standard library and ``adapters.wire`` only; knows nothing of CAN, MQTT or the C
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 from adapters.errors import CommandError, UnknownCommandError
 from adapters.rsdk.protocol import DEFAULT_CMD_TYPE, Frame, encode
 from adapters.wire.layout import Field, Layout, LayoutError, PayloadCodec, Tail
+from adapters.wire.table import EMPTY, CommandSpec, Message, Table, TaggedUnion
 
 __all__ = [
     "BY_NAME",
     "COMMANDS",
+    "COMMAND_TABLE",
     "DEVICE_IDS",
     "RETURN_CODES",
     "TABLE",
-    "Command",
+    "CommandSpec",
     "Message",
     "TaggedUnion",
     "TlvCodec",
@@ -51,6 +54,7 @@ __all__ = [
     "payload_examples",
     "return_code_text",
     "version_text",
+    "wants_reply",
 ]
 
 # §2.3.2 Figure 5
@@ -113,57 +117,11 @@ def _examples(codec: PayloadCodec) -> list[dict[str, Any]]:
     return more() if callable(more) else [codec.example()]
 
 
-class TaggedUnion:
+def _union(head: Layout, tag: str, arms: Mapping[int, Layout]) -> TaggedUnion:
     """A payload whose tail depends on a tag byte: fixed ``head`` fields (the tag among them), then
-    the layout of the ``arms`` entry for the tag value (0x0A device_type, 0x12 command_sub_id)."""
-
-    def __init__(self, head: Layout, tag: str, arms: Mapping[int, Layout]) -> None:
-        if tag not in {f.name for f in head.fields}:
-            raise ValueError(f"tag {tag!r} is not a head field")
-        self.head = head
-        self.tag = tag
-        self.arms = dict(arms)
-
-    @property
-    def size(self) -> int | None:
-        sizes = {a.size for a in self.arms.values()}
-        only = sizes.pop() if len(sizes) == 1 else None
-        return None if only is None else self.head.fixed_size + only
-
-    def _arm(self, tag_value: Any) -> Layout:
-        arm = self.arms.get(tag_value) if isinstance(tag_value, int) else None
-        if arm is None:
-            known = ", ".join(f"0x{t:02X}" for t in self.arms)
-            raise LayoutError(f"{self.tag} {tag_value!r} unknown; known: {known}")
-        return arm
-
-    def decode(self, data: bytes) -> dict[str, Any]:
-        n = self.head.fixed_size
-        if len(data) < n:
-            raise LayoutError(f"payload is {len(data)} bytes, needs at least {n}")
-        out = self.head.decode(data[:n])
-        out.update(self._arm(out[self.tag]).decode(data[n:]))
-        return out
-
-    def encode(self, values: Mapping[str, Any]) -> bytes:
-        if self.tag not in values:
-            raise LayoutError(f"missing field {self.tag!r} (one of {[hex(t) for t in self.arms]})")
-        arm = self._arm(values[self.tag])
-        head_names = {f.name for f in self.head.fields}
-        arm_names = {f.name for f in arm.fields}
-        unknown = set(values) - head_names - arm_names
-        if unknown:
-            raise LayoutError(f"unknown field(s) {sorted(unknown)}; known: {sorted(head_names | arm_names)}")
-        head = _prepare(self.head, {k: v for k, v in values.items() if k in head_names})
-        tail = _prepare(arm, {k: v for k, v in values.items() if k in arm_names})
-        return self.head.encode(head) + arm.encode(tail)
-
-    def example(self) -> dict[str, Any]:
-        return self.examples()[0]
-
-    def examples(self) -> list[dict[str, Any]]:
-        """One in-range sample per arm (the round-trip matrix covers every arm)."""
-        return [{**self.head.example(), self.tag: t, **arm.example()} for t, arm in self.arms.items()]
+    the layout of the ``arms`` entry for the tag value (0x0A device_type, 0x12 command_sub_id);
+    encoding is strict (:func:`_prepare`)."""
+    return TaggedUnion(tag, arms, head=head, prepare=_prepare)
 
 
 @dataclass(frozen=True, slots=True)
@@ -387,45 +345,48 @@ FOCUS_SUB_ID = u8("command_sub_id", "0x01 position control, 0x02 calibration, 0x
 MOTOR_TYPE = u8("motor_type", "0x00 focus motor", "", 0, 0)
 
 
-@dataclass(frozen=True, slots=True)
-class Command:
-    """One table entry.
+def _cmd(
+    name: str,
+    cmd_set: int,
+    cmd_id: int,
+    command: PayloadCodec,
+    reply: PayloadCodec | None,
+    section: str,
+    direction: str,
+    doc: str = "",
+    *,
+    when: Mapping[str, int] = EMPTY,
+    examples: tuple[Mapping[str, Any], ...] = (),
+    handler: str = "",
+) -> CommandSpec:
+    """One table entry (:class:`adapters.wire.table.CommandSpec`) in the seed's terms.
 
     ``command``/``reply`` describe the payload after CmdSet/CmdID; ``reply`` is None where the seed says
     the command has no reply frame. ``when`` holds field values that pick this entry among several at
-    one key (and are filled in when encoding); ``examples`` adds samples to the test matrix."""
+    one key (the spec's ``fixed``: filled in when encoding); ``examples`` adds samples to the test
+    matrix; ``handler`` names the adapter method a pushed frame of this entry goes to."""
+    return CommandSpec(
+        name, cmd_set, cmd_id, (command,), () if reply is None else (reply,), RETURN_CODES, direction,
+        fixed=when, section=section, doc=doc, examples=examples, handler=handler,
+    )  # fmt: skip
 
-    name: str
-    cmd_set: int
-    cmd_id: int
-    command: PayloadCodec
-    reply: PayloadCodec | None
-    section: str
-    direction: str
-    doc: str = ""
-    when: Mapping[str, int] = field(default_factory=dict)
-    examples: tuple[Mapping[str, Any], ...] = ()
 
-    @property
-    def key(self) -> tuple[int, int]:
-        return (self.cmd_set, self.cmd_id)
-
-    def wants_reply(self, values: Mapping[str, Any]) -> bool:
-        """Whether a command frame with these fields gets a reply (per-arm for tagged unions)."""
-        reply = self.reply
-        if reply is None:
-            return False
-        if isinstance(reply, TaggedUnion) and isinstance(self.command, TaggedUnion):
-            return values.get(self.command.tag) in reply.arms
-        return True
+def wants_reply(spec: CommandSpec, values: Mapping[str, Any]) -> bool:
+    """Whether a command frame with these fields gets a reply (per-arm for tagged unions)."""
+    if not spec.reply:
+        return False
+    reply, command = spec.reply[0], spec.request[0]
+    if isinstance(reply, TaggedUnion) and isinstance(command, TaggedUnion):
+        return values.get(command.tag) in reply.arms
+    return True
 
 
 HOST = "host -> gimbal"
 GIMBAL = "gimbal -> host"
 DEVICE = "external device -> gimbal"
 
-_ENTRIES: tuple[Command, ...] = (
-    Command(
+_ENTRIES: tuple[CommandSpec, ...] = (
+    _cmd(
         "position_control",
         0x0E,
         0x00,
@@ -449,7 +410,7 @@ _ENTRIES: tuple[Command, ...] = (
         HOST,
         "move to an angle (seed §3.3 sample)",
     ),
-    Command(
+    _cmd(
         "speed_control",
         0x0E,
         0x01,
@@ -472,7 +433,7 @@ _ENTRIES: tuple[Command, ...] = (
         HOST,
         "holds 0.5 s only: resend at >= 10 Hz while moving; all-zero speeds stop",
     ),
-    Command(
+    _cmd(
         "get_angle",
         0x0E,
         0x02,
@@ -492,7 +453,7 @@ _ENTRIES: tuple[Command, ...] = (
         HOST,
         "obtain attitude or joint angles",
     ),
-    Command(
+    _cmd(
         "set_limit_angle",
         0x0E,
         0x03,
@@ -501,7 +462,7 @@ _ENTRIES: tuple[Command, ...] = (
         "2.3.4.4",
         HOST,
     ),
-    Command(
+    _cmd(
         "get_limit_angle",
         0x0E,
         0x04,
@@ -510,7 +471,7 @@ _ENTRIES: tuple[Command, ...] = (
         "2.3.4.5",
         HOST,
     ),
-    Command(
+    _cmd(
         "set_stiffness",
         0x0E,
         0x05,
@@ -526,7 +487,7 @@ _ENTRIES: tuple[Command, ...] = (
         "2.3.4.6",
         HOST,
     ),
-    Command(
+    _cmd(
         "get_stiffness",
         0x0E,
         0x06,
@@ -537,7 +498,7 @@ _ENTRIES: tuple[Command, ...] = (
         "2.3.4.7",
         HOST,
     ),
-    Command(
+    _cmd(
         "push_settings",
         0x0E,
         0x07,
@@ -547,7 +508,7 @@ _ENTRIES: tuple[Command, ...] = (
         HOST,
         "0x01 turns on the unsolicited param_push (0x0E 0x08) frames",
     ),
-    Command(
+    _cmd(
         "param_push",
         0x0E,
         0x08,
@@ -572,8 +533,9 @@ _ENTRIES: tuple[Command, ...] = (
         "2.3.4.9",
         GIMBAL,
         "unsolicited push (40-byte frame), CmdType reply bit clear",
+        handler="_on_push",
     ),
-    Command(
+    _cmd(
         "get_version",
         0x0E,
         0x09,
@@ -589,7 +551,7 @@ _ENTRIES: tuple[Command, ...] = (
         HOST,
         "module version query: 4-byte command; its reply has the reply bit and 9 bytes",
     ),
-    Command(
+    _cmd(
         "version_push",
         0x0E,
         0x09,
@@ -606,11 +568,11 @@ _ENTRIES: tuple[Command, ...] = (
         "an external device shows its version at 1 Hz: a command frame like get_version, told apart "
         "by direction and length (8 bytes vs 4)",
     ),
-    Command(
+    _cmd(
         "external_control",
         0x0E,
         0x0A,
-        TaggedUnion(
+        _union(
             Layout([u8("device_type", "0x00 unknown, 0x01 joystick, 0x02 dial controller")]),
             "device_type",
             {
@@ -629,7 +591,7 @@ _ENTRIES: tuple[Command, ...] = (
         DEVICE,
         "joystick or dial pushes; no reply frame",
     ),
-    Command(
+    _cmd(
         "get_user_params",
         0x0E,
         0x0B,
@@ -639,7 +601,7 @@ _ENTRIES: tuple[Command, ...] = (
         HOST,
         examples=({"read_ids": [0x00, 0x22, 0x23]},),
     ),
-    Command(
+    _cmd(
         "set_user_params",
         0x0E,
         0x0C,
@@ -650,7 +612,7 @@ _ENTRIES: tuple[Command, ...] = (
         "2.3.4.13",
         HOST,
     ),
-    Command(
+    _cmd(
         "set_operating_mode",
         0x0E,
         0x0D,
@@ -668,7 +630,7 @@ _ENTRIES: tuple[Command, ...] = (
         "2.3.4.14",
         HOST,
     ),
-    Command(
+    _cmd(
         "recenter_selfie",
         0x0E,
         0x0E,
@@ -684,7 +646,7 @@ _ENTRIES: tuple[Command, ...] = (
         "Figure 27; same key and shape as follow_mode, chosen by operating_mode == 0xFE",
         when={"operating_mode": 0xFE},
     ),
-    Command(
+    _cmd(
         "follow_mode",
         0x0E,
         0x0E,
@@ -699,7 +661,7 @@ _ENTRIES: tuple[Command, ...] = (
         HOST,
         "Figure 28; same key and shape as recenter_selfie",
     ),
-    Command(
+    _cmd(
         "auto_calibration",
         0x0E,
         0x0F,
@@ -711,7 +673,7 @@ _ENTRIES: tuple[Command, ...] = (
         HOST,
         "no reply frame: progress comes as calibration_push (0x0E 0x10)",
     ),
-    Command(
+    _cmd(
         "calibration_push",
         0x0E,
         0x10,
@@ -720,8 +682,9 @@ _ENTRIES: tuple[Command, ...] = (
         "2.3.4.17",
         GIMBAL,
         "auto calibration status/progress push",
+        handler="_on_calibration",
     ),
-    Command(
+    _cmd(
         "active_track",
         0x0E,
         0x11,
@@ -734,11 +697,11 @@ _ENTRIES: tuple[Command, ...] = (
         HOST,
         "no reply frame",
     ),
-    Command(
+    _cmd(
         "focus_motor",
         0x0E,
         0x12,
-        TaggedUnion(
+        _union(
             Layout([FOCUS_SUB_ID]),
             "command_sub_id",
             {
@@ -769,7 +732,7 @@ _ENTRIES: tuple[Command, ...] = (
             },
         ),
         # Position control (0x01) has no reply frame; calibration and get-position do.
-        TaggedUnion(
+        _union(
             Layout([RETURN_CODE, FOCUS_SUB_ID]),
             "command_sub_id",
             {
@@ -793,7 +756,7 @@ _ENTRIES: tuple[Command, ...] = (
         HOST,
         "sub-commands: 0x01 position (100 Hz, no reply), 0x02 calibration, 0x15 get position",
     ),
-    Command(
+    _cmd(
         "camera_control",
         0x0D,
         0x00,
@@ -814,7 +777,7 @@ _ENTRIES: tuple[Command, ...] = (
         HOST,
         "third-party camera motion command",
     ),
-    Command(
+    _cmd(
         "camera_status",
         0x0D,
         0x01,
@@ -827,17 +790,11 @@ _ENTRIES: tuple[Command, ...] = (
 )
 
 
-def _build_table(entries: Iterable[Command]) -> dict[tuple[int, int], tuple[Command, ...]]:
-    table: dict[tuple[int, int], tuple[Command, ...]] = {}
-    for e in entries:
-        table[e.key] = (*table.get(e.key, ()), e)
-    return table
-
-
-TABLE: dict[tuple[int, int], tuple[Command, ...]] = _build_table(_ENTRIES)
+COMMAND_TABLE = Table(_ENTRIES)
+TABLE = COMMAND_TABLE.by_key
 """(cmd_set, cmd_id) -> its entries (two for 0x0E 0x09 and 0x0E 0x0E, one elsewhere)."""
 
-BY_NAME: dict[str, Command] = {e.name: e for e in _ENTRIES}
+BY_NAME: dict[str, CommandSpec] = {e.name: e for e in _ENTRIES}
 assert len(BY_NAME) == len(_ENTRIES), "command names must be unique"
 COMMANDS: list[str] = list(BY_NAME)
 
@@ -870,34 +827,17 @@ def _swap_legacy(name: str, fields: Mapping[str, Any], order: str) -> dict[str, 
     return out
 
 
-@dataclass(frozen=True, slots=True)
-class Message:
-    """A decoded command, push or reply: ``fields`` maps the seed's names to wire-unit values.
-
-    ``legacy`` is True for a reply in the pre-2.2.0.5 format (no CmdSet/CmdID in its data)."""
-
-    name: str
-    cmd_set: int
-    cmd_id: int
-    is_reply: bool
-    fields: dict[str, Any]
-    legacy: bool = False
-
-
-def lookup(command: str | tuple[int, int], *, reply: bool = False) -> Command:
+def lookup(command: str | tuple[int, int], *, reply: bool = False) -> CommandSpec:
     """Entry by name, or by (cmd_set, cmd_id) (the first entry at the key; with ``reply``, the first
     one that has a reply frame). Raises CommandError listing the valid names."""
     if isinstance(command, str):
-        spec = BY_NAME.get(command)
-        if spec is None:
-            raise UnknownCommandError(f"unknown command {command!r}; valid: {', '.join(COMMANDS)}")
-        return spec
-    entries = TABLE.get((command[0], command[1]))
+        return COMMAND_TABLE.named(command)
+    entries = COMMAND_TABLE.at((command[0], command[1]))
     if not entries:
         raise UnknownCommandError(f"unknown command key {command!r}; valid names: {', '.join(COMMANDS)}")
     if reply:
         for e in entries:
-            if e.reply is not None:
+            if e.reply:
                 return e
     return entries[0]
 
@@ -925,21 +865,22 @@ def build_frame(
     (reply required), or 0x00 when the seed says no reply frame comes; replies get reply type 0 unless
     ``cmd_type`` says."""
     spec = lookup(command, reply=reply)
-    codec = spec.reply if reply else spec.command
-    if codec is None:
+    codecs = spec.reply if reply else spec.request
+    if not codecs:
         raise CommandError(f"{spec.name} has no reply frame (seed §{spec.section})")
-    values = {**spec.when, **fields} if not reply else dict(fields)
+    values = {**spec.fixed, **fields} if not reply else dict(fields)
     if reply and legacy:
         values = _swap_legacy(spec.name, values, angle_order)
     try:
-        payload = encode_payload(codec, values)
+        payload = encode_payload(codecs[0], values)
     except LayoutError as e:
         raise CommandError(f"{spec.name}{' reply' if reply else ''}: {e}") from None
     if cmd_type is None:
-        cmd_type = 0 if reply else (DEFAULT_CMD_TYPE if spec.wants_reply(values) else 0x00)
+        cmd_type = 0 if reply else (DEFAULT_CMD_TYPE if wants_reply(spec, values) else 0x00)
     if reply and legacy:
         return Frame(None, None, payload, seq, cmd_type, True)
-    return Frame(spec.cmd_set, spec.cmd_id, payload, seq, cmd_type, reply)
+    cmd_set, cmd_id = spec.set_and_id
+    return Frame(cmd_set, cmd_id, payload, seq, cmd_type, reply)
 
 
 def encode_command(
@@ -984,7 +925,7 @@ def decode_message(frame: Frame) -> Message:
     if frame.enc & 0xE0:
         raise CommandError("encrypted payload (unsupported)")
     key = frame.key
-    entries = TABLE.get(key) if key is not None else None
+    entries = COMMAND_TABLE.at(key) if key is not None else None
     if not entries:
         if frame.is_reply:
             raise CommandError(
@@ -994,19 +935,19 @@ def decode_message(frame: Frame) -> Message:
         raise UnknownCommandError(f"unknown command {_key_text(frame.cmd_set, frame.cmd_id)}")
     errors = []
     for spec in entries:
-        codec = spec.reply if frame.is_reply else spec.command
-        if codec is None:
+        codecs = spec.reply if frame.is_reply else spec.request
+        if not codecs:
             errors.append(f"{spec.name} has no reply frame")
             continue
         try:
-            fields = _decode_with(codec, frame.payload)
+            fields = _decode_with(codecs[0], frame.payload)
         except LayoutError as e:
             errors.append(f"{spec.name}{' reply' if frame.is_reply else ''}: {e}")
             continue
-        if not frame.is_reply and any(fields.get(k) != v for k, v in spec.when.items()):
-            errors.append(f"{spec.name}: needs {dict(spec.when)}")
+        if not frame.is_reply and not spec.matches(fields):
+            errors.append(f"{spec.name}: needs {dict(spec.fixed)}")
             continue
-        return Message(spec.name, spec.cmd_set, spec.cmd_id, frame.is_reply, fields)
+        return Message(spec.name, spec.cmd_set, spec.cmd_id, fields, frame.is_reply)
     raise CommandError("; ".join(errors))
 
 
@@ -1035,43 +976,44 @@ def decode_reply(
         raise CommandError("encrypted payload (unsupported)")
     spec = lookup(name) if name is not None else lookup((cmd_set, cmd_id), reply=True)
     if spec.key != (cmd_set, cmd_id):
-        raise CommandError(f"{spec.name} is {_key_text(*spec.key)}, not {_key_text(cmd_set, cmd_id)}")
-    if spec.reply is None:
+        raise CommandError(f"{spec.name} is {_key_text(*spec.set_and_id)}, not {_key_text(cmd_set, cmd_id)}")
+    if not spec.reply:
         raise CommandError(f"{spec.name} has no reply frame (seed §{spec.section})")
+    codec = spec.reply[0]
     data = frame.data
     latest_err = "data does not start with the command's CmdSet/CmdID"
     if len(data) >= 2 and data[0] == cmd_set and data[1] == cmd_id:
         try:
-            return Message(spec.name, cmd_set, cmd_id, True, _decode_with(spec.reply, data[2:]))
+            return Message(spec.name, cmd_set, cmd_id, _decode_with(codec, data[2:]), is_reply=True)
         except LayoutError as e:
             latest_err = str(e)
     try:
-        fields = _swap_legacy(spec.name, _decode_with(spec.reply, data), angle_order)
-        return Message(spec.name, cmd_set, cmd_id, True, fields, legacy=True)
+        fields = _swap_legacy(spec.name, _decode_with(codec, data), angle_order)
+        return Message(spec.name, cmd_set, cmd_id, fields, is_reply=True, legacy=True)
     except LayoutError as e:
         raise CommandError(
             f"{spec.name} reply fits neither format: latest: {latest_err}; legacy: {e}"
         ) from None
 
 
-def payload_examples(spec: Command, *, reply: bool = False) -> list[dict[str, Any]]:
+def payload_examples(spec: CommandSpec, *, reply: bool = False) -> list[dict[str, Any]]:
     """In-range samples for the test matrix: every union arm, every TLV id, plus the entry's extras."""
-    codec = spec.reply if reply else spec.command
-    if codec is None:
+    codecs = spec.reply if reply else spec.request
+    if not codecs:
         return []
     if reply:
-        return _examples(codec)
-    base = [dict(ex) for ex in spec.examples] or _examples(codec)
-    return [{**ex, **spec.when} for ex in base]
+        return _examples(codecs[0])
+    base = [dict(ex) for ex in spec.examples] or _examples(codecs[0])
+    return [{**ex, **spec.fixed} for ex in base]
 
 
-def _check_table(entries: Sequence[Command]) -> None:
-    """Import-time sanity: shared keys must be separable by payload size or ``when``."""
-    for key, group in _build_table(entries).items():
+def _check_table(table: Table) -> None:
+    """Import-time sanity: shared keys must be separable by payload size or ``fixed`` values."""
+    for key, group in table.by_key.items():
         if len(group) > 1:
-            sizes = [g.command.size for g in group]
-            if len(set(sizes)) != len(sizes) and not all(g.when for g in group[:-1]):
+            sizes = [g.request[0].size for g in group]
+            if len(set(sizes)) != len(sizes) and not all(g.fixed for g in group[:-1]):
                 raise AssertionError(f"entries at {key} cannot be told apart")
 
 
-_check_table(_ENTRIES)
+_check_table(COMMAND_TABLE)

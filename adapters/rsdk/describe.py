@@ -82,16 +82,14 @@ class _Session:
     def _decode(self, frame: Frame) -> cmds.Message:
         if not frame.is_reply:
             msg = cmds.decode_message(frame)
-            self.sent[frame.seq] = (msg.cmd_set, msg.cmd_id, msg.name)
+            self.sent[frame.seq] = (*cmds.lookup(msg.name).set_and_id, msg.name)
             return msg
         sent = self.sent.get(frame.seq)
         if sent is not None:
             return cmds.decode_reply(frame, *sent, angle_order=self.angle_order)
         if self.reply_to is not None:
             spec = self.reply_to
-            return cmds.decode_reply(
-                frame, spec.cmd_set, spec.cmd_id, spec.name, angle_order=self.angle_order
-            )
+            return cmds.decode_reply(frame, *spec.set_and_id, spec.name, angle_order=self.angle_order)
         return cmds.decode_message(frame)
 
 
