@@ -20,16 +20,17 @@ from adapters.robomaster import describe
 from adapters.robomaster.commands import (
     COMMAND_NAMES,
     CONTROL_COMMANDS,
+    CONTROL_TABLE,
     DEFAULT_CONTROL_CMD_ID,
     INTERACTION_MAX_USER_DATA,
     REFEREE_COMMANDS,
+    REFEREE_TABLE,
     ROBOT_IDS,
     SEASONS,
     BitLayout,
     Bits,
     ControlChannel,
     Message,
-    RefereeCommand,
     check_season,
     codec_field_names,
     decode_message,
@@ -42,6 +43,7 @@ from adapters.robomaster.commands import (
 )
 from adapters.robomaster.protocol import Decoder, Frame, encode_frame
 from adapters.wire.layout import Field, Layout, PayloadCodec
+from adapters.wire.table import CommandSpec
 
 # PROTOCOL-NOTES, "Command ids change size by season" (2024 = V1.6.1 / 2025 / 2026): what we encode.
 NOTES_SIZES: dict[int, tuple[int, int, int]] = {
@@ -62,15 +64,21 @@ NOTES_SIZES: dict[int, tuple[int, int, int]] = {
     0x020D: (4, 6, 6),
 }
 
-CASES: list[tuple[RefereeCommand, str, PayloadCodec]] = [
+CASES: list[tuple[CommandSpec, str, PayloadCodec]] = [
     (entry, season, codec)
-    for entry in REFEREE_COMMANDS.values()
+    for name in REFEREE_TABLE.names
     for season in SEASONS
-    for codec in entry.layouts[season]
+    for entry in [REFEREE_TABLE.named(name, season)]
+    for codec in entry.request
 ]
 CASE_IDS = [f"{e.name}-{s}-{size_range(c)[0]}" for e, s, c in CASES]
-ENTRY_SEASONS = [(e, s) for e in REFEREE_COMMANDS.values() for s in SEASONS]
+ENTRY_SEASONS = [(REFEREE_TABLE.named(n, s), s) for n in REFEREE_TABLE.names for s in SEASONS]
 ENTRY_SEASON_IDS = [f"{e.name}-{s}" for e, s in ENTRY_SEASONS]
+
+
+def referee(cmd_id: int, season: str) -> CommandSpec:
+    (entry,) = REFEREE_TABLE.at((None, cmd_id), season)
+    return entry
 
 
 def one_frame(raw: bytes) -> Frame:
@@ -85,45 +93,44 @@ def one_frame(raw: bytes) -> Frame:
 
 def test_every_notes_entry_is_in_the_table_with_its_season_sizes() -> None:
     for cmd_id, sizes in NOTES_SIZES.items():
-        entry = REFEREE_COMMANDS[cmd_id]
-        got = tuple(size_range(entry.layouts[s][0]) for s in SEASONS)
-        assert got == tuple((n, n) for n in sizes), entry.name
+        got = tuple(size_range(referee(cmd_id, s).request[0]) for s in SEASONS)
+        assert got == tuple((n, n) for n in sizes), REFEREE_COMMANDS[cmd_id]
 
 
 def test_interaction_is_sub_header_plus_at_most_112_bytes() -> None:
-    entry = REFEREE_COMMANDS[0x0301]
     for season in SEASONS:
-        (codec,) = entry.layouts[season]
+        (codec,) = referee(0x0301, season).request
         assert size_range(codec) == (6, 6 + 112)
         assert codec_field_names(codec) == ["data_cmd_id", "sender_id", "receiver_id", "user_data"]
 
 
 def test_table_entries_are_documented() -> None:
-    for entry in REFEREE_COMMANDS.values():
+    for entry in REFEREE_TABLE.specs:
         assert entry.name and entry.doc and entry.direction and entry.section
-        assert set(entry.layouts) == set(SEASONS)
+    for name, entries in REFEREE_TABLE.by_name.items():
+        assert [e.variant for e in entries] == list(SEASONS), name
     for ctl in CONTROL_COMMANDS.values():
         assert ctl.name and ctl.doc and ctl.direction == "gateway->robot"
 
 
 def test_command_names_are_unique_and_cover_both_tables() -> None:
-    names = [e.name for e in REFEREE_COMMANDS.values()] + [c.name for c in CONTROL_COMMANDS.values()]
+    names = list(REFEREE_COMMANDS.values()) + [c.name for c in CONTROL_COMMANDS.values()]
     assert list(COMMAND_NAMES) == names and len(set(names)) == len(names)
 
 
 @pytest.mark.parametrize(("entry", "season", "codec"), CASES, ids=CASE_IDS)
 def test_every_entry_round_trips_in_every_season(
-    entry: RefereeCommand, season: str, codec: PayloadCodec
+    entry: CommandSpec, season: str, codec: PayloadCodec
 ) -> None:
     example = codec.example()
     payload = codec.encode(example)
     assert len(payload) == size_range(codec)[0]
-    assert decode_payload(entry.cmd_id, payload, season) == Message(entry.name, entry.cmd_id, example)
-    if codec is entry.layouts[season][0]:  # what encode_message emits, through a real frame
+    assert decode_payload(entry.cmd_id, payload, season) == Message(entry.name, None, entry.cmd_id, example)
+    if codec is entry.request[0]:  # what encode_message emits, through a real frame
         raw = encode_message(entry.name, example, season, seq=42)
         frame = one_frame(raw)
         assert (frame.seq, frame.cmd_id, frame.data) == (42, entry.cmd_id, payload)
-        assert decode_message(frame, season) == Message(entry.name, entry.cmd_id, example)
+        assert decode_message(frame, season) == Message(entry.name, None, entry.cmd_id, example)
 
 
 def _has_non_finite(fields: dict[str, Any]) -> bool:
@@ -132,7 +139,7 @@ def _has_non_finite(fields: dict[str, Any]) -> bool:
 
 @given(st.sampled_from(CASES), st.data())
 def test_random_payloads_decode_and_re_encode_bit_exact(
-    case: tuple[RefereeCommand, str, PayloadCodec], data: st.DataObject
+    case: tuple[CommandSpec, str, PayloadCodec], data: st.DataObject
 ) -> None:
     entry, season, codec = case
     lo, hi = size_range(codec)
@@ -141,13 +148,13 @@ def test_random_payloads_decode_and_re_encode_bit_exact(
     assert msg.name == entry.name
     assume(not _has_non_finite(msg.fields))  # NaN/inf floats decode but are refused on encode
     assert codec.encode(msg.fields) == payload
-    if codec is entry.layouts[season][0]:
+    if codec is entry.request[0]:
         assert encode_payload(entry.name, msg.fields, season) == (entry.cmd_id, payload)
 
 
 @pytest.mark.parametrize(("entry", "season"), ENTRY_SEASONS, ids=ENTRY_SEASON_IDS)
-def test_wrong_sizes_are_rejected_per_season(entry: RefereeCommand, season: str) -> None:
-    ranges = [size_range(c) for c in entry.layouts[season]]
+def test_wrong_sizes_are_rejected_per_season(entry: CommandSpec, season: str) -> None:
+    ranges = [size_range(c) for c in entry.request]
     top = max(hi for _, hi in ranges)
     for n in range(top + 3):
         if any(lo <= n <= hi for lo, hi in ranges):
@@ -327,9 +334,9 @@ def test_bitlayout_must_cover_its_word() -> None:
 
 
 def test_message_is_frozen_slotted_and_compared_by_value() -> None:
-    a = Message("stop", DEFAULT_CONTROL_CMD_ID, {"reason": 1})
-    assert a == Message("stop", DEFAULT_CONTROL_CMD_ID, {"reason": 1})
-    assert a != Message("stop", DEFAULT_CONTROL_CMD_ID, {"reason": 2})
+    a = Message("stop", None, DEFAULT_CONTROL_CMD_ID, {"reason": 1})
+    assert a == Message("stop", None, DEFAULT_CONTROL_CMD_ID, {"reason": 1})
+    assert a != Message("stop", None, DEFAULT_CONTROL_CMD_ID, {"reason": 2})
     assert not hasattr(a, "__dict__")
     with pytest.raises(dataclasses.FrozenInstanceError):
         a.name = "x"  # type: ignore[misc]
@@ -357,7 +364,9 @@ def test_control_frames_on_the_default_channel() -> None:
     frame = one_frame(raw)
     assert frame.cmd_id == 0x0F01 == DEFAULT_CONTROL_CMD_ID and frame.seq == 7
     assert frame.data == b"\x01" + struct.pack("<fff", 1.0, -0.5, 0.25)
-    assert decode_message(frame) == Message("chassis_velocity", 0x0F01, {"vx": 1.0, "vy": -0.5, "wz": 0.25})
+    assert decode_message(frame) == Message(
+        "chassis_velocity", None, 0x0F01, {"vx": 1.0, "vy": -0.5, "wz": 0.25}
+    )
     assert one_frame(
         encode_message("gimbal_angle", {"yaw": 0.5, "pitch": -0.125})
     ).data == b"\x02" + struct.pack("<ff", 0.5, -0.125)
@@ -370,11 +379,11 @@ def test_control_frames_on_the_default_channel() -> None:
     "channel", [ControlChannel(), ControlChannel(0x1234), ControlChannel(0x0301, 0x02FF, 7, 107)]
 )
 def test_every_control_message_round_trips(ctl: Any, channel: ControlChannel) -> None:
-    example = ctl.layout.example()
+    example = ctl.request[0].example()
     frame = one_frame(encode_message(ctl.name, example, "2024", seq=3, control=channel))
     assert frame.cmd_id == channel.cmd_id
     for season in SEASONS:
-        assert decode_message(frame, season, channel) == Message(ctl.name, channel.cmd_id, example)
+        assert decode_message(frame, season, channel) == Message(ctl.name, None, channel.cmd_id, example)
 
 
 def test_wrapped_control_uses_the_interaction_sub_header() -> None:
@@ -468,12 +477,8 @@ def test_describe_reports_garbage_frames_and_payload_problems_in_order() -> None
 @pytest.mark.parametrize("command", COMMAND_NAMES)
 @pytest.mark.parametrize("season", SEASONS)
 def test_describe_encode_then_decode(command: str, season: str) -> None:
-    entry = next((e for e in REFEREE_COMMANDS.values() if e.name == command), None)
-    codec = (
-        entry.layouts[season][0]
-        if entry
-        else next(c.layout for c in CONTROL_COMMANDS.values() if c.name == command)
-    )
+    table = REFEREE_TABLE if command in REFEREE_TABLE.by_name else CONTROL_TABLE
+    codec = table.named(command, season).request[0]
     fields = codec.example()
     raw = describe.encode_command(command, 9, fields, season=season)
     (rec,) = describe.decode_bytes(raw, season=season)

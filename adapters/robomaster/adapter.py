@@ -56,12 +56,13 @@ from typing import Any
 from adapters.base import CallResult, DeviceInfo, TelemetrySink
 from adapters.clock import SYSTEM_CLOCK, Clock
 from adapters.errors import CommandError, DeviceNotConnected, DeviceRejected, InvalidParameters, LinkError
-from adapters.robomaster.commands import ControlChannel, decode_message, encode_message
+from adapters.robomaster.commands import REFEREE_TABLE, ControlChannel, decode_message, encode_message
 from adapters.robomaster.config import RobomasterDeviceSettings
 from adapters.robomaster.extensions import ChassisVelocity, GimbalAngle, Interaction, RobotRequest
 from adapters.robomaster.protocol import Decoder, Frame
 from adapters.serial_link import SerialLink
 from adapters.supervision import SupervisedAdapter
+from adapters.wire.table import bind_handlers
 from schemas.results import ResultCode
 from schemas.services import CameraScreenDrag, FlightAuthorityGrab, GimbalReset
 
@@ -222,9 +223,9 @@ class RobotAdapter(SupervisedAdapter):
             self.undecodable += 1
             log.debug("robot %s: %s", self.info.sn, exc)
             return
-        handler = getattr(self, f"_on_{msg.name}", None)
+        handler = _PUSHES.get(msg.name)
         if handler is not None:
-            handler(msg.fields)
+            handler(self, msg.fields)
 
     def _on_game_status(self, f: Mapping[str, Any]) -> None:
         self.game_type = f["game_type"]
@@ -510,3 +511,7 @@ class RobotAdapter(SupervisedAdapter):
         self._end_drag()
         self._gimbal_to(*targets[mode])
         return CallResult()
+
+
+# referee payload → handler, as the table's entries name them (a missing method fails here, at import)
+_PUSHES = bind_handlers(RobotAdapter, REFEREE_TABLE)

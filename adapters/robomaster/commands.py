@@ -59,17 +59,19 @@ the gateway, in ordinary 0xA5 frames:
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Final
 
 from adapters.errors import CommandError, UnknownCommandError
 from adapters.robomaster.protocol import Frame, encode_frame
 from adapters.wire import bits as wire_bits
 from adapters.wire.layout import Field, Layout, LayoutError, PayloadCodec, Tail
+from adapters.wire.table import EMPTY, CommandSpec, Message, Table
 
 __all__ = [
     "COMMAND_NAMES",
     "CONTROL_COMMANDS",
+    "CONTROL_TABLE",
     "DEFAULT_CONTROL",
     "DEFAULT_CONTROL_CMD_ID",
     "DEFAULT_SEASON",
@@ -77,14 +79,13 @@ __all__ = [
     "INTERACTION_HEADER",
     "INTERACTION_MAX_USER_DATA",
     "REFEREE_COMMANDS",
+    "REFEREE_TABLE",
     "ROBOT_IDS",
     "SEASONS",
     "BitLayout",
     "Bits",
     "ControlChannel",
-    "ControlCommand",
     "Message",
-    "RefereeCommand",
     "check_season",
     "codec_field_names",
     "decode_message",
@@ -222,17 +223,23 @@ def _same(codec: PayloadCodec, *alternatives: PayloadCodec) -> dict[str, tuple[P
     return {s: (codec, *alternatives) for s in SEASONS}
 
 
-@dataclass(frozen=True, slots=True)
-class RefereeCommand:
-    """One referee cmd_id: its layout(s) per season. The first layout of a season is the one we
-    encode; any listed layout whose size matches decodes."""
-
-    cmd_id: int
-    name: str
-    doc: str
-    direction: str
-    section: str
-    layouts: Mapping[str, tuple[PayloadCodec, ...]] = field(repr=False)
+def _referee(
+    cmd_id: int,
+    name: str,
+    doc: str,
+    direction: str,
+    section: str,
+    layouts: Mapping[str, tuple[PayloadCodec, ...]],
+    handler: str = "",
+) -> tuple[CommandSpec, ...]:
+    """One referee cmd_id as table entries, one per season (the table's variant): the first layout of
+    a season is the one we encode; any listed layout whose size matches decodes. ``handler`` names
+    the adapter method the payload goes to."""
+    return tuple(
+        CommandSpec(name, None, cmd_id, layouts[s], (), EMPTY, direction, s, section=section, doc=doc,
+                    handler=handler)
+        for s in SEASONS
+    )  # fmt: skip
 
 
 _GAME_STATUS = wire_bits.BitLayout(
@@ -319,16 +326,17 @@ INTERACTION_MAX_USER_DATA = 112
 INTERACTION_HEADER = Layout([_u16("data_cmd_id"), _u16("sender_id"), _u16("receiver_id")])
 _INTERACTION = Layout(INTERACTION_HEADER.fields, Tail("user_data", max_len=INTERACTION_MAX_USER_DATA))
 
-_REFEREE_TABLE: tuple[RefereeCommand, ...] = (
-    RefereeCommand(
+_REFEREE_SPECS: tuple[CommandSpec, ...] = (
+    *_referee(
         0x0001,
         "game_status",
         "game type/progress, stage time left, UNIX time (1 Hz)",
         "server->all robots",
         "game_status_t (V1.6.1; 2026 V1.2.0 table 1-5)",
         _same(_GAME_STATUS),
+        handler="_on_game_status",
     ),
-    RefereeCommand(
+    *_referee(
         0x0002,
         "game_result",
         "0 draw, 1 red wins, 2 blue wins",
@@ -336,7 +344,7 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
         "game_result_t (2026 V1.2.0 table 1-6)",
         _same(Layout([_u8("winner")])),
     ),
-    RefereeCommand(
+    *_referee(
         0x0003,
         "game_robot_hp",
         "robot, outpost and base HP; 2026 sends only the own (ally) side (3 Hz)",
@@ -348,7 +356,7 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
             "2026": (_hp(_team_hp("ally", "reserved_1")),),
         },
     ),
-    RefereeCommand(
+    *_referee(
         0x0101,
         "event_data",
         "site event bit mask (supply zones, energy mechanism, highlands, dart hits); meanings vary by season",
@@ -356,23 +364,25 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
         "event_data_t (2026 V1.2.0 table 1-8)",
         _same(Layout([_u32("event_data", "bits")])),
     ),
-    RefereeCommand(
+    *_referee(
         0x0104,
         "referee_warning",
         "last penalty: level (1 both yellow, 2 yellow, 3 red, 4 forfeit), offender, count",
         "server->penalised side",
         "referee_warning_t (2026 V1.2.0 table 1-9)",
         _same(Layout([_u8("level"), _u8("offending_robot_id"), _u8("count")])),
+        handler="_on_referee_warning",
     ),
-    RefereeCommand(
+    *_referee(
         0x0201,
         "robot_status",
         "own id, level, HP, barrel cooling/heat limit, chassis power limit, power outputs (10 Hz)",
         "main control module->own robot",
         "robot_status_t (2026 V1.2.0 table 1-11)",
         _same(_ROBOT_STATUS),
+        handler="_on_robot_status",
     ),
-    RefereeCommand(
+    *_referee(
         0x0202,
         "power_heat_data",
         "chassis power (2024 only), buffer energy, barrel heat",
@@ -420,16 +430,18 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
                 ),
             ),
         },
+        handler="_on_power_heat_data",
     ),
-    RefereeCommand(
+    *_referee(
         0x0203,
         "robot_pos",
         "own position on the field and heading",
         "main control module->own robot",
         "robot_pos_t (2026 V1.2.0 table 1-13; summary table says 16 bytes)",
         _same(_ROBOT_POS, _ROBOT_POS_16),
+        handler="_on_robot_pos",
     ),
-    RefereeCommand(
+    *_referee(
         0x0204,
         "buff",
         "recovery/cooling/defence/vulnerability/attack buffs, remaining energy bits (2025+)",
@@ -451,8 +463,9 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
                 ),
             ),
         },
+        handler="_on_buff",
     ),
-    RefereeCommand(
+    *_referee(
         0x0206,
         "hurt_data",
         "armour/module id and HP deduction reason (0 projectile, 1 module offline, 5 collision ...)",
@@ -463,8 +476,9 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
                 [_u8("_hurt")], (wire_bits.Bits("_hurt", (("armor_id", 4), ("HP_deduction_reason", 4))),)
             )
         ),
+        handler="_on_hurt_data",
     ),
-    RefereeCommand(
+    *_referee(
         0x0207,
         "shoot_data",
         "projectile type, shooter id, rate and muzzle speed of the last shot",
@@ -480,8 +494,9 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
                 ]
             )
         ),
+        handler="_on_shoot_data",
     ),
-    RefereeCommand(
+    *_referee(
         0x0208,
         "projectile_allowance",
         "rounds the robot may still fire, gold coins, fortress reserve (2025+)",
@@ -490,8 +505,9 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
         # 2025 = 8 bytes per PROTOCOL-NOTES, field name from the 2026 document; at least one team
         # header citing V1.7.0 still shows the 6-byte form, so 2025 is the least certain entry here.
         {"2024": (_ALLOWANCE_6,), "2025": (_ALLOWANCE_8,), "2026": (_ALLOWANCE_8, _ALLOWANCE_6)},
+        handler="_on_projectile_allowance",
     ),
-    RefereeCommand(
+    *_referee(
         0x0209,
         "rfid_status",
         "buff-point RFID cards detected (bit mask); 2026 adds a second byte",
@@ -503,7 +519,7 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
             "2026": (Layout([_u32("rfid_status", "bits"), _u8("rfid_status_2", "bits")]),),
         },
     ),
-    RefereeCommand(
+    *_referee(
         0x020B,
         "ground_robot_position",
         "own ground robots' positions (to the sentry); infantry 5 slot reserved from 2025",
@@ -515,7 +531,7 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
             "2026": (_GROUND_RESERVED,),
         },
     ),
-    RefereeCommand(
+    *_referee(
         0x020D,
         "sentry_info",
         "sentry exchange/revive state bit fields; 2025 adds sentry_info_2",
@@ -527,7 +543,7 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
             "2026": (Layout([_u32("sentry_info", "bits"), _u16("sentry_info_2", "bits")]),),
         },
     ),
-    RefereeCommand(
+    *_referee(
         INTERACTION_CMD_ID,
         "robot_interaction_data",
         "sub-header (data_cmd_id, sender_id, receiver_id) + up to 112 bytes of user data",
@@ -537,8 +553,10 @@ _REFEREE_TABLE: tuple[RefereeCommand, ...] = (
     ),
 )
 
-REFEREE_COMMANDS: dict[int, RefereeCommand] = {c.cmd_id: c for c in _REFEREE_TABLE}
-_REFEREE_BY_NAME: dict[str, RefereeCommand] = {c.name: c for c in _REFEREE_TABLE}
+REFEREE_TABLE = Table(_REFEREE_SPECS, variants=SEASONS, variant_noun="season")
+"""The referee payloads: one entry per (cmd_id, season)."""
+REFEREE_COMMANDS: dict[int, str] = {s.cmd_id: s.name for s in _REFEREE_SPECS}
+"""cmd_id -> its name (the same in every season)."""
 
 
 # --------------------------------------------------------------------------- control messages
@@ -549,43 +567,41 @@ _DJI_CMD_RANGES = ((0x0000, 0x03FF), (0x0A00, 0x0AFF))
 _STUDENT_DATA_CMD_IDS = range(0x0200, 0x0300)
 
 
-@dataclass(frozen=True, slots=True)
-class ControlCommand:
-    """One gateway->robot control message: its type byte and body layout."""
-
-    msg_type: int
-    name: str
-    layout: Layout
-    doc: str
-    direction: str = "gateway->robot"
-    section: str = "gateway control contract (commands.py docstring)"
+def _control(msg_type: int, name: str, layout: Layout, doc: str) -> CommandSpec:
+    """One gateway->robot control message: its type byte (the entry's ``cmd_id``) and body layout."""
+    section = "gateway control contract (commands.py docstring)"
+    return CommandSpec(name, None, msg_type, (layout,), (), EMPTY, "gateway->robot", section=section, doc=doc)
 
 
-_CONTROL_TABLE: tuple[ControlCommand, ...] = (
-    ControlCommand(
-        0x01,
-        "chassis_velocity",
-        Layout([_f32("vx", "m/s", "forward"), _f32("vy", "m/s", "left"), _f32("wz", "rad/s", "CCW")]),
-        "chassis velocity set-point in the body frame; resend at >= 10 Hz",
-    ),
-    ControlCommand(
-        0x02,
-        "gimbal_angle",
-        Layout([_f32("yaw", "rad", "from calibrated zero, CCW"), _f32("pitch", "rad", "elevation, up +")]),
-        "absolute gimbal angle set-point",
-    ),
-    ControlCommand(
-        0x03,
-        "stop",
-        Layout([_u8("reason", doc="0 operator, 1 watchdog, 2 emergency, 3 shutdown")]),
-        "zero the chassis and hold the gimbal",
-    ),
+CONTROL_TABLE = Table(
+    (
+        _control(
+            0x01,
+            "chassis_velocity",
+            Layout([_f32("vx", "m/s", "forward"), _f32("vy", "m/s", "left"), _f32("wz", "rad/s", "CCW")]),
+            "chassis velocity set-point in the body frame; resend at >= 10 Hz",
+        ),
+        _control(
+            0x02,
+            "gimbal_angle",
+            Layout(
+                [_f32("yaw", "rad", "from calibrated zero, CCW"), _f32("pitch", "rad", "elevation, up +")]
+            ),
+            "absolute gimbal angle set-point",
+        ),
+        _control(
+            0x03,
+            "stop",
+            Layout([_u8("reason", doc="0 operator, 1 watchdog, 2 emergency, 3 shutdown")]),
+            "zero the chassis and hold the gimbal",
+        ),
+    )
 )
+"""The gateway's own control messages, keyed by their type byte (``cmd_id``)."""
 
-CONTROL_COMMANDS: dict[int, ControlCommand] = {c.msg_type: c for c in _CONTROL_TABLE}
-_CONTROL_BY_NAME: dict[str, ControlCommand] = {c.name: c for c in _CONTROL_TABLE}
+CONTROL_COMMANDS: dict[int, CommandSpec] = {c.cmd_id: c for c in CONTROL_TABLE.specs}
 
-COMMAND_NAMES: tuple[str, ...] = tuple(c.name for c in _REFEREE_TABLE) + tuple(c.name for c in _CONTROL_TABLE)
+COMMAND_NAMES: tuple[str, ...] = REFEREE_TABLE.names + CONTROL_TABLE.names
 if len(set(COMMAND_NAMES)) != len(COMMAND_NAMES):
     raise RuntimeError(f"command names must be unique: {COMMAND_NAMES}")
 
@@ -638,15 +654,6 @@ DEFAULT_CONTROL = ControlChannel()
 # --------------------------------------------------------------------------- encode / decode
 
 
-@dataclass(frozen=True, slots=True)
-class Message:
-    """A decoded payload: the table ``name``, the frame's ``cmd_id`` and the fields in wire units."""
-
-    name: str
-    cmd_id: int
-    fields: dict[str, Any]
-
-
 def _expected(codecs: Sequence[PayloadCodec]) -> str:
     parts = []
     for codec in codecs:
@@ -662,18 +669,19 @@ def _decode_control(control: ControlChannel, data: bytes) -> Message:
         raise CommandError(f"{where}: empty body, expected a message type byte", cmd_id=control.cmd_id)
     entry = CONTROL_COMMANDS.get(body[0])
     if entry is None:
-        known = ", ".join(f"0x{c.msg_type:02X} {c.name}" for c in _CONTROL_TABLE)
+        known = ", ".join(f"0x{c.cmd_id:02X} {c.name}" for c in CONTROL_TABLE.specs)
         raise CommandError(
             f"{where}: unknown message type 0x{body[0]:02X}; known: {known}", cmd_id=control.cmd_id
         )
-    size = size_range(entry.layout)[0]
+    layout = entry.request[0]
+    size = size_range(layout)[0]
     if len(body) - 1 != size:
         raise CommandError(
             f"{where} ({entry.name}): body is {len(body) - 1} bytes after the type byte, expected {size}",
             cmd_id=control.cmd_id,
             name=entry.name,
         )
-    return Message(entry.name, control.cmd_id, entry.layout.decode(body[1:]))
+    return Message(entry.name, None, control.cmd_id, layout.decode(body[1:]))
 
 
 def decode_payload(
@@ -684,14 +692,15 @@ def decode_payload(
     data = bytes(data)
     if control.carries(cmd_id, data):
         return _decode_control(control, data)
-    entry = REFEREE_COMMANDS.get(cmd_id)
-    if entry is None:
+    found = REFEREE_TABLE.at((None, cmd_id), season)
+    if not found:
         raise UnknownCommandError(f"unknown cmd_id 0x{cmd_id:04X} ({len(data)}-byte payload)", cmd_id=cmd_id)
-    codecs = entry.layouts[season]
+    entry = found[0]
+    codecs = entry.request
     for codec in codecs:
         lo, hi = size_range(codec)
         if lo <= len(data) <= hi:
-            return Message(entry.name, cmd_id, codec.decode(data))
+            return Message(entry.name, None, cmd_id, codec.decode(data))
     raise CommandError(
         f"cmd_id 0x{cmd_id:04X} ({entry.name}), season {season}: payload is {len(data)} bytes, "
         f"expected {_expected(codecs)}",
@@ -715,20 +724,19 @@ def encode_payload(
 ) -> tuple[int, bytes]:
     """``(cmd_id, payload)`` for a named message; ValueError for unknown names, fields or values."""
     season = check_season(season)
-    ctl = _CONTROL_BY_NAME.get(name)
+    ctl = CONTROL_TABLE.by_name.get(name)
     try:
-        if ctl is not None:
-            body = bytes([ctl.msg_type]) + ctl.layout.encode(fields)
+        if ctl:
+            body = bytes([ctl[0].cmd_id]) + ctl[0].request[0].encode(fields)
             if control.wrapped:
                 head = {"data_cmd_id": control.data_cmd_id, "sender_id": control.sender_id}
                 body = INTERACTION_HEADER.encode({**head, "receiver_id": control.receiver_id}) + body
             return control.cmd_id, body
-        entry = _REFEREE_BY_NAME.get(name)
-        if entry is None:
-            raise UnknownCommandError(
-                f"unknown command {name!r}; valid: {', '.join(COMMAND_NAMES)}", name=name
-            )
-        return entry.cmd_id, entry.layouts[season][0].encode(fields)
+        if name not in REFEREE_TABLE.by_name:
+            valid = ", ".join(COMMAND_NAMES)
+            raise UnknownCommandError(f"unknown command {name!r}; valid: {valid}", name=name)
+        entry = REFEREE_TABLE.named(name, season)
+        return entry.cmd_id, entry.request[0].encode(fields)
     except LayoutError as exc:
         raise LayoutError(f"{name} (season {season}): {exc}") from exc
 

@@ -7,7 +7,7 @@ Two sans-I/O models (a clock value in, frames out; nothing here sleeps or reads 
   settling; then a new match when ``loop``), HP, robot status, power and barrel heat, buffs,
   shots, projectile allowance, hits (``hurt_data``) and penalties (``referee_warning``, repeated
   at 1 Hz after the first, so a receiver is shown that a repeat is not a new penalty).
-  Payloads follow the chosen season's layouts (``commands.REFEREE_COMMANDS``).
+  Payloads follow the chosen season's layouts (``commands.REFEREE_TABLE``).
 * :class:`RobotBoard` is the team's main board: it obeys the gateway's control messages
   (``chassis_velocity`` for at most :data:`BOARD_HOLD_S` after the last one, ``gimbal_angle``,
   ``stop``), integrates its pose on the field and records the 0x0301 interaction data it is asked
@@ -45,9 +45,8 @@ from adapters.families import InProcessSim
 from adapters.robomaster.commands import (
     DEFAULT_CONTROL,
     DEFAULT_SEASON,
-    REFEREE_COMMANDS,
+    REFEREE_TABLE,
     ControlChannel,
-    RefereeCommand,
     check_season,
     codec_field_names,
     decode_message,
@@ -89,8 +88,6 @@ NOMINAL_RATES: dict[str, float] = {
     "projectile_allowance": 10.0,
     "rfid_status": 3.0,
 }
-
-_BY_NAME: dict[str, RefereeCommand] = {c.name: c for c in REFEREE_COMMANDS.values()}
 
 # Level-1 performance by role (id % 100): max HP, barrel cooling (/s), heat limit, chassis power (W).
 _ROLE_STATS: dict[int, tuple[int, int, int, int]] = {
@@ -349,7 +346,7 @@ class RefereeMatch:
     # -- payloads ------------------------------------------------------------------------------
     def _frame(self, name: str, values: Mapping[str, Any]) -> bytes:
         """Encode ``values`` against this season's layout; names the season lacks are left out."""
-        known = set(codec_field_names(_BY_NAME[name].layouts[self.season][0]))
+        known = set(codec_field_names(REFEREE_TABLE.named(name, self.season).request[0]))
         fields = {k: v for k, v in values.items() if k in known}
         self._seq = (self._seq + 1) & 0xFF
         self.sent[name] += 1
@@ -413,7 +410,7 @@ class RefereeMatch:
         team, n = robot_team(self.robot_id), self.robot_id % 100
         own = {f"{team}_{n}_robot_HP", f"ally_{n}_robot_HP"}
         out: dict[str, int] = {}
-        for fname in codec_field_names(_BY_NAME["game_robot_hp"].layouts[self.season][0]):
+        for fname in codec_field_names(REFEREE_TABLE.named("game_robot_hp", self.season).request[0]):
             if fname in own:
                 out[fname] = self.hp
             elif fname.endswith("_robot_HP"):
