@@ -15,12 +15,21 @@ standard library only, so sans-I/O codecs may use it (``tests/test_sans_io.py`` 
      │    ├── InvalidParameters    → 325001  in range for the contract, out of range for this device
      │    └── DeviceRejected       → the result code it carries (the device answered "no")
      ├── LinkError                 a serial port or CAN bus could not be opened, or failed in use
+     ├── MissionStopped            a mission ended short of its last waypoint without a device error
+     ├── RuntimeError
+     │    └── SessionsExhausted    all 30 acknowledged DJI-frame sessions wait for their ACK
      └── ValueError
-          └── CodecError           bytes or fields that do not fit a protocol (sans-I/O codecs)
-               ├── FrameError      framing: start byte, length, CRC, encryption, seq range
-               ├── LayoutError     a payload against its layout: length, field type or range
-               └── CommandError    a command table: no entry fits (wrong size, tag, selector)
-                    └── UnknownCommandError   no entry at all for a name, key or cmd_id
+          ├── CodecError           bytes or fields that do not fit a protocol (sans-I/O codecs)
+          │    ├── FrameError      framing: start byte, length, CRC, encryption, seq range
+          │    ├── LayoutError     a payload against its layout: length, field type or range
+          │    └── CommandError    a command table: no entry fits (wrong size, tag, selector)
+          │         └── UnknownCommandError   no entry at all for a name, key or cmd_id
+          └── Refused              input refused before any device sees it; ``code`` = its result
+               ├── KmzError        a wayline KMZ (archive, WPML) the gateway will not read
+               └── RouteRefused    a route the aircraft cannot fly (``break_reason``)
+
+The family registry's ``UnknownFamily`` (a ``LookupError``, ``adapters/families.py``) is a
+configuration error, not an adapter's, and stays there.
 
 Codec errors are ``ValueError`` s (bad input, not a failing device): a caller that only cares that
 the bytes were bad catches :class:`CodecError`. An adapter turns the ones a request can cause into
@@ -41,9 +50,14 @@ __all__ = [
     "DeviceTimeout",
     "FrameError",
     "InvalidParameters",
+    "KmzError",
     "LayoutError",
     "LinkError",
     "MethodNotSupported",
+    "MissionStopped",
+    "Refused",
+    "RouteRefused",
+    "SessionsExhausted",
     "UnknownCommandError",
 ]
 
@@ -106,3 +120,37 @@ class CommandError(CodecError):
 
 class UnknownCommandError(CommandError):
     """No table entry for a name, a key or a cmd_id (for a frame: a valid frame we do not decode)."""
+
+
+class SessionsExhausted(RuntimeError):
+    """All 30 ACK-required sessions are waiting for their ACK."""
+
+
+class MissionStopped(Exception):
+    """The mission ended short of its last waypoint without a flight-controller error (cancelled, a stop)."""
+
+
+class Refused(ValueError):
+    """Input refused before any device sees it: ``code`` is the Cloud API result, ``reason`` says why
+    in a few words."""
+
+    def __init__(self, code: int, reason: str) -> None:
+        super().__init__(reason)
+        self.code = code
+        self.reason = reason
+
+
+class KmzError(Refused):
+    """A refused KMZ (archive or WPML)."""
+
+
+#: the result for a route that cannot be flown (WAYLINE-NOTES)
+NOT_FLYABLE = 314003
+
+
+class RouteRefused(Refused):
+    """The route cannot be flown: ``break_reason`` (WAYLINE-NOTES §4.1), ``code`` the Cloud API result."""
+
+    def __init__(self, break_reason: int, reason: str, code: int = NOT_FLYABLE) -> None:
+        super().__init__(code, reason)
+        self.break_reason = break_reason

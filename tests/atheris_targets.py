@@ -495,8 +495,9 @@ def _kmz() -> OneInput:
     """A wayline file from the cloud: a KMZ (``PK…``) or the WPML inside one, read, parsed and mapped
     onto Onboard SDK missions: only the documented refusals (KmzError, RouteRefused) may come out."""
     with _instrumented():
-        from adapters.osdk.wayline_plan import PlanOptions, RouteRefused, plan_route
-        from adapters.wayline.kmz import KmzError, Limits, parse_wpml, unpack_wpml
+        from adapters.errors import KmzError, RouteRefused
+        from adapters.osdk.wayline_plan import PlanOptions, plan_route
+        from adapters.wayline.kmz import Limits, parse_wpml, unpack_wpml
 
     limits = Limits(max_entry_bytes=1 << 20, max_total_bytes=4 << 20)
     options = PlanOptions(

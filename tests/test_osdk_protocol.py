@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from adapters.errors import FrameError
+from adapters.errors import FrameError, SessionsExhausted
 from adapters.osdk.protocol import (
     ENCRYPTED_REASON,
     MAX_FRAME_LEN,
@@ -21,7 +21,6 @@ from adapters.osdk.protocol import (
     DuplicateFilter,
     Frame,
     SessionMode,
-    SessionsExhausted,
     SessionTable,
     decode_frame,
     encode_ack,

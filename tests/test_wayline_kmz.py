@@ -14,9 +14,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from adapters.errors import KmzError, RouteRefused
 from adapters.osdk import commands as cmds
-from adapters.osdk.wayline_plan import MISSION_MAX, PlanOptions, RouteRefused, plan_route
-from adapters.wayline.kmz import KmzError, Limits, load_route, parse_wpml, unpack_wpml
+from adapters.osdk.wayline_plan import MISSION_MAX, PlanOptions, plan_route
+from adapters.wayline.kmz import Limits, load_route, parse_wpml, unpack_wpml
 from adapters.wayline.writer import ActionSpec, PointSpec, kmz_bytes, md5_hex, waylines_wpml
 from gateway.wayline.task import Phase, TaskBook
 from tests.test_sans_io import ROOT, _imports

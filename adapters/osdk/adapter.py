@@ -49,6 +49,7 @@ from adapters.errors import (
     DeviceTimeout,
     InvalidParameters,
     LinkError,
+    SessionsExhausted,
     UnknownCommandError,
 )
 from adapters.osdk import commands as cmds
@@ -60,14 +61,7 @@ from adapters.osdk.extensions import (
     IdleVelocity,
     Pause,
 )
-from adapters.osdk.protocol import (
-    Decoder,
-    DuplicateFilter,
-    Frame,
-    SessionMode,
-    SessionsExhausted,
-    SessionTable,
-)
+from adapters.osdk.protocol import Decoder, DuplicateFilter, Frame, SessionMode, SessionTable
 from adapters.osdk.telemetry import ITEMS as _TELEMETRY_ITEMS
 from adapters.osdk.wayline import OsdkWayline
 from adapters.serial_link import SerialLink

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Generic, TypeVar
 
-from adapters.errors import FrameError
+from adapters.errors import FrameError, SessionsExhausted
 from adapters.wire.dji_frame import (
     BAD_HEADER_CRC,
     BAD_SOF,
@@ -73,7 +73,6 @@ __all__ = [
     "SentFrame",
     "SessionMode",
     "SessionTable",
-    "SessionsExhausted",
     "decode_frame",
     "encode_ack",
     "encode_command",
@@ -221,10 +220,6 @@ class SessionMode(IntEnum):
     NO_ACK = 0  # session 0
     ACK_TOLERANT = 1  # session 1: an ACK is wanted, its loss tolerated (never resent)
     ACK_REQUIRED = 2  # sessions 2..31: resend the same frame on timeout
-
-
-class SessionsExhausted(RuntimeError):
-    """All 30 ACK-required sessions are waiting for their ACK."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -15,10 +15,10 @@ import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from adapters.errors import DeviceNotConnected, DeviceRejected, DeviceTimeout
+from adapters.errors import DeviceNotConnected, DeviceRejected, DeviceTimeout, MissionStopped
 from adapters.osdk.wayline_plan import MISSION_MAX, FcMission, Plan, PlanOptions, plan_route
 from adapters.wayline.kmz import Route
-from adapters.wayline.runner import MissionStopped, Reached
+from adapters.wayline.runner import Reached
 from schemas.results import ResultCode
 
 if TYPE_CHECKING:

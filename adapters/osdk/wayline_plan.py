@@ -61,8 +61,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from adapters.errors import RouteRefused
 from adapters.wayline.kmz import Action, ActionGroup, Placemark, Route
-from adapters.wayline.runner import RouteRefused
 
 log = logging.getLogger(__name__)
 

@@ -37,13 +37,14 @@ from xml.etree.ElementTree import Element, ParseError
 from defusedxml import DefusedXmlException
 from defusedxml.ElementTree import fromstring
 
+from adapters.errors import KmzError
+
 __all__ = [
     "KML_NS",
     "MAX_WAYPOINTS",
     "WAYLINES_PATH",
     "Action",
     "ActionGroup",
-    "KmzError",
     "Limits",
     "MissionConfig",
     "Placemark",
@@ -63,15 +64,6 @@ WAYLINES_PATH = "wpmz/waylines.wpml"
 MAX_WAYPOINTS = 5000
 #: Result codes (schemas.results.ResultCode; numbers here: adapters do not import the contract's codes).
 MD5_EMPTY, FILE_FORMAT, MD5_MISMATCH = 314002, 314003, 314005
-
-
-class KmzError(ValueError):
-    """A refused KMZ: ``code`` is the Cloud API result, ``reason`` says why in a few words."""
-
-    def __init__(self, code: int, reason: str) -> None:
-        super().__init__(reason)
-        self.code = code
-        self.reason = reason
 
 
 @dataclass(frozen=True, slots=True)

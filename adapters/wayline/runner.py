@@ -12,26 +12,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from adapters.errors import NOT_FLYABLE
 from adapters.wayline.kmz import Route
 
-__all__ = ["NOT_FLYABLE", "MissionStopped", "Reached", "RouteRefused", "WaylineRunner"]
+__all__ = ["NOT_FLYABLE", "Reached", "WaylineRunner"]
 
 #: Result code for a route the aircraft cannot fly (314003: "wayline file format not supported").
-NOT_FLYABLE = 314003
-
-
-class RouteRefused(ValueError):
-    """The route cannot be flown: ``break_reason`` (WAYLINE-NOTES §4.1), ``code`` the Cloud API result."""
-
-    def __init__(self, break_reason: int, reason: str, code: int = NOT_FLYABLE) -> None:
-        super().__init__(reason)
-        self.break_reason = break_reason
-        self.reason = reason
-        self.code = code
-
-
-class MissionStopped(Exception):
-    """The mission ended short of its last waypoint without a flight-controller error (cancelled, a stop)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -46,9 +46,16 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
 
-from adapters.errors import DeviceNotConnected, DeviceRejected, DeviceTimeout
-from adapters.wayline.kmz import FILE_FORMAT, KmzError, Route, check_fingerprint, parse_wpml, unpack_wpml
-from adapters.wayline.runner import MissionStopped, Reached, RouteRefused
+from adapters.errors import (
+    DeviceNotConnected,
+    DeviceRejected,
+    DeviceTimeout,
+    KmzError,
+    MissionStopped,
+    RouteRefused,
+)
+from adapters.wayline.kmz import FILE_FORMAT, Route, check_fingerprint, parse_wpml, unpack_wpml
+from adapters.wayline.runner import Reached
 from gateway.clock import Clock
 from gateway.cloud_requests import CloudRequestError, CloudRequests
 from gateway.devices import DeviceTable
