@@ -56,6 +56,7 @@ from typing import Any
 from adapters.base import CallResult, DeviceInfo, TelemetrySink
 from adapters.clock import SYSTEM_CLOCK, Clock
 from adapters.errors import CommandError, DeviceNotConnected, DeviceRejected, InvalidParameters, LinkError
+from adapters.hold import HeldSetpoint
 from adapters.robomaster.commands import REFEREE_TABLE, ControlChannel, decode_message, encode_message
 from adapters.robomaster.config import RobomasterDeviceSettings
 from adapters.robomaster.extensions import ChassisVelocity, GimbalAngle, Interaction, RobotRequest
@@ -133,12 +134,22 @@ class RobotAdapter(SupervisedAdapter):
         self._last_warning: tuple[int, int, int] | None = None
         # motion
         self.velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
-        self._velocity_until = float("-inf")
-        self._velocity_task: asyncio.Task[None] | None = None
+        self._velocity = HeldSetpoint(
+            f"robomaster-{self.info.sn}-vel",
+            period=1.0 / settings.control.rate_hz,
+            clock=self._clock,
+            refresh=self._velocity_refresh,
+            on_end=self._velocity_ended,
+        )
         self.gimbal_setpoint: tuple[float, float] = (0.0, 0.0)  # yaw CCW, pitch up (degrees)
         self._drag_speed: tuple[float, float] = (0.0, 0.0)  # yaw CCW, pitch up (°/s)
-        self._drag_until = float("-inf")
-        self._drag_task: asyncio.Task[None] | None = None
+        self._drag = HeldSetpoint(
+            f"robomaster-{self.info.sn}-drag",
+            period=1.0 / settings.drag_rate_hz,
+            clock=self._clock,
+            refresh=self._drag_refresh,
+            step_to_deadline=True,
+        )
         self._loop: asyncio.AbstractEventLoop | None = None
         self._last_drive = float("-inf")  # when live control (DRC) last drove the chassis
         self.handlers = {
@@ -187,13 +198,9 @@ class RobotAdapter(SupervisedAdapter):
 
     def _cancel_motion(self) -> None:
         self.velocity = (0.0, 0.0, 0.0)
-        self._velocity_until = float("-inf")
-        self._drag_until = float("-inf")
         self._drag_speed = (0.0, 0.0)
-        for task in (self._velocity_task, self._drag_task):
-            if task is not None and task is not asyncio.current_task():
-                task.cancel()
-        self._velocity_task = self._drag_task = None
+        self._velocity.cancel()
+        self._drag.cancel()
 
     # -- link supervision (the loop is SupervisedAdapter's) ----------------------------------------
     def _on_link_opened(self) -> None:
@@ -346,33 +353,18 @@ class RobotAdapter(SupervisedAdapter):
                 raise InvalidParameters(f"{name} {value:g} outside ±{limit:g} for robot {self.info.sn}")
         self._send_or_raise("chassis_velocity", {"vx": vx, "vy": vy, "wz": wz})
         self.velocity = (vx, vy, wz)
-        self._velocity_until = self._now() + (hold if hold is not None else s.control.hold)
-        if self._velocity_task is None or self._velocity_task.done():
-            loop = asyncio.get_running_loop()
-            self._velocity_task = loop.create_task(
-                self._velocity_loop(), name=f"robomaster-{self.info.sn}-vel"
-            )
+        self._velocity.hold(hold if hold is not None else s.control.hold)
 
-    async def _velocity_loop(self) -> None:
-        period = 1.0 / self.settings.control.rate_hz
-        try:
-            while True:
-                left = self._velocity_until - self._now()
-                if left <= 0:
-                    break
-                await self._clock.sleep(min(period, left))
-                if self._now() >= self._velocity_until:
-                    break
-                vx, vy, wz = self.velocity
-                with contextlib.suppress(LinkError):
-                    self._send("chassis_velocity", {"vx": vx, "vy": vy, "wz": wz})
-            self.velocity = (0.0, 0.0, 0.0)
-            if self._now() - self._last_drive > self.settings.control.hold:  # live control took over
-                with contextlib.suppress(LinkError):
-                    self._send("chassis_velocity", _ZERO)
-        finally:
-            if self._velocity_task is asyncio.current_task():
-                self._velocity_task = None
+    def _velocity_refresh(self, dt: float) -> None:
+        vx, vy, wz = self.velocity
+        with contextlib.suppress(LinkError):
+            self._send("chassis_velocity", {"vx": vx, "vy": vy, "wz": wz})
+
+    def _velocity_ended(self) -> None:
+        self.velocity = (0.0, 0.0, 0.0)
+        if self._now() - self._last_drive > self.settings.control.hold:  # live control took over
+            with contextlib.suppress(LinkError):
+                self._send("chassis_velocity", _ZERO)
 
     # -- live control (DRC): called from the DRC streaming thread -----------------------------------
     def drive(self, forward: float, right: float, up: float, yaw_rate: float) -> bool:
@@ -387,7 +379,7 @@ class RobotAdapter(SupervisedAdapter):
         vy = max(-s.max_vy, min(s.max_vy, -float(right)))
         wz = max(-s.max_wz, min(s.max_wz, -math.radians(float(yaw_rate))))
         self._last_drive = self._now()
-        self._velocity_until = float("-inf")  # a service's velocity loop ends at its next wake-up
+        self._velocity.expire()  # a service's velocity loop ends at its next wake-up
         try:
             self._send("chassis_velocity", {"vx": vx, "vy": vy, "wz": wz})
         except LinkError:
@@ -396,7 +388,8 @@ class RobotAdapter(SupervisedAdapter):
 
     def emergency_stop(self) -> None:
         """``stop`` reason 2 (emergency) now, from any thread; the motion loops end on the loop."""
-        self._velocity_until = self._drag_until = float("-inf")
+        self._velocity.expire()
+        self._drag.expire()
         with contextlib.suppress(LinkError):
             self._send("stop", {"reason": STOP_EMERGENCY})
         if self._loop is not None:
@@ -412,7 +405,7 @@ class RobotAdapter(SupervisedAdapter):
     @property
     def dragging(self) -> bool:
         """True while a camera_screen_drag keeps moving the gimbal set-point."""
-        return self._drag_task is not None
+        return self._drag.running
 
     # -- Cloud API methods ------------------------------------------------------------------------
     async def _authority_grab(self, data: FlightAuthorityGrab) -> CallResult:
@@ -470,11 +463,9 @@ class RobotAdapter(SupervisedAdapter):
         if not self._online:
             raise DeviceNotConnected(f"robot {self.info.sn} is not connected")
         self._drag_speed = (yaw, pitch)
-        self._drag_until = self._now() + s.drag_hold
-        if self._drag_task is None or self._drag_task.done():
+        if not self._drag.running:
             self._drag_step(0.0)
-            loop = asyncio.get_running_loop()
-            self._drag_task = loop.create_task(self._drag_loop(), name=f"robomaster-{self.info.sn}-drag")
+        self._drag.hold(s.drag_hold)
         return CallResult()
 
     def _drag_step(self, dt: float) -> None:
@@ -483,25 +474,12 @@ class RobotAdapter(SupervisedAdapter):
         pitch = min(s.pitch_max_deg, max(s.pitch_min_deg, pitch + self._drag_speed[1] * dt))
         self._gimbal_to(yaw + self._drag_speed[0] * dt, pitch)
 
-    async def _drag_loop(self) -> None:
-        period = 1.0 / self.settings.drag_rate_hz
-        last = self._now()
-        try:
-            while self._now() < self._drag_until:
-                await self._clock.sleep(min(period, max(0.0, self._drag_until - self._now())))
-                now = self._now()
-                with contextlib.suppress(DeviceNotConnected):
-                    self._drag_step(min(now, self._drag_until) - last)
-                last = now
-        finally:
-            if self._drag_task is asyncio.current_task():
-                self._drag_task = None
+    def _drag_refresh(self, dt: float) -> None:
+        with contextlib.suppress(DeviceNotConnected):
+            self._drag_step(dt)
 
     def _end_drag(self) -> None:
-        self._drag_until = float("-inf")
-        if self._drag_task is not None:
-            self._drag_task.cancel()
-            self._drag_task = None
+        self._drag.cancel()
 
     async def _gimbal_reset(self, data: GimbalReset) -> CallResult:
         mode = int(data.reset_mode)

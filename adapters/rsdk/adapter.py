@@ -52,6 +52,7 @@ from adapters.errors import (
     LinkError,
     MethodNotSupported,
 )
+from adapters.hold import HeldSetpoint
 from adapters.rsdk.can import Reassembler, segment
 from adapters.rsdk.commands import (
     COMMAND_TABLE,
@@ -150,8 +151,14 @@ class GimbalAdapter(SupervisedAdapter):
         self.recording = False
         # drag state
         self._drag_speed: tuple[float, float] = (0.0, 0.0)  # yaw, pitch °/s
-        self._drag_until = float("-inf")
-        self._drag_task: asyncio.Task[None] | None = None
+        self._drag = HeldSetpoint(
+            f"rsdk-{settings.sn}-drag",
+            period=1.0 / settings.drag_rate_hz,
+            clock=self._clock,
+            refresh=self._drag_refresh,
+            on_end=self._zero_and_release,
+            end_when_cancelled=True,
+        )
         self.handlers = {
             "camera_screen_drag": self._screen_drag,
             "camera_aim": self._aim,
@@ -196,22 +203,15 @@ class GimbalAdapter(SupervisedAdapter):
         self._stopping = True
         with contextlib.suppress(Exception):
             await self.stop_motion()
-        await self._end_supervision(self._drag_task)
+        await self._end_supervision(self._drag.task)
         self._fail_pending(DeviceNotConnected(f"gimbal {self.info.sn} adapter stopped"))
 
     async def stop_motion(self) -> None:
         """Zero speed and release speed control. Fire-and-forget: no reply is awaited, so a stalled
         gimbal or a busy loop cannot delay it."""
-        self._drag_until = float("-inf")
         self._drag_speed = (0.0, 0.0)
-        if self._drag_task is not None:
-            self._drag_task.cancel()
-            self._drag_task = None
-        for ctrl in (SPEED_TAKE_OVER, SPEED_RELEASE):
-            with contextlib.suppress(LinkError, CommandError):
-                self._send_no_reply(
-                    "speed_control", {"yaw_speed": 0, "roll_speed": 0, "pitch_speed": 0, "ctrl_byte": ctrl}
-                )
+        self._drag.cancel()
+        self._zero_and_release()
 
     def drive(self, forward: float, right: float, up: float, yaw_rate: float) -> bool:
         """Live control of the gimbal (when ``drc_drive``): yaw rate → yaw speed, vertical stick → pitch
@@ -266,7 +266,7 @@ class GimbalAdapter(SupervisedAdapter):
 
     def _on_online_changed(self, online: bool) -> None:
         if not online:
-            self._drag_until = float("-inf")  # a drag in progress stops and releases at its next wake-up
+            self._drag.expire()  # a drag in progress stops and releases at its next wake-up
 
     def _fail_pending(self, exc: Exception) -> None:
         pending, self._pending = self._pending, {}
@@ -468,10 +468,9 @@ class GimbalAdapter(SupervisedAdapter):
         if max(abs(yaw), abs(pitch)) > s.max_speed_dps:
             raise InvalidParameters(f"drag speed above {s.max_speed_dps:g} °/s")
         self._drag_speed = (yaw, pitch)
-        self._drag_until = self._now() + s.drag_hold
+        self._drag.until = self._now() + s.drag_hold
         await self._command("speed_control", self._speed_fields(yaw, pitch), ResultCode.SCREEN_DRAG_FAILED)
-        if self._drag_task is None or self._drag_task.done():
-            self._drag_task = asyncio.get_running_loop().create_task(self._drag_loop())
+        self._drag.start()
         return CallResult()
 
     @staticmethod
@@ -483,24 +482,19 @@ class GimbalAdapter(SupervisedAdapter):
             "ctrl_byte": SPEED_TAKE_OVER,
         }
 
-    async def _drag_loop(self) -> None:
-        """Refresh speed control while the drag lasts, then stop and release."""
-        period = 1.0 / self.settings.drag_rate_hz
-        try:
-            while self._now() < self._drag_until:
-                await self._clock.sleep(min(period, max(0.0, self._drag_until - self._now())))
-                if self._now() >= self._drag_until:
-                    break
-                with contextlib.suppress(LinkError, CommandError):
-                    self._send_no_reply("speed_control", self._speed_fields(*self._drag_speed))
-        finally:
-            self._drag_task = None
-            for ctrl in (SPEED_TAKE_OVER, SPEED_RELEASE):
-                with contextlib.suppress(LinkError, CommandError):
-                    self._send_no_reply(
-                        "speed_control",
-                        {"yaw_speed": 0, "roll_speed": 0, "pitch_speed": 0, "ctrl_byte": ctrl},
-                    )
+    def _drag_refresh(self, dt: float) -> None:
+        """Refresh speed control while the drag lasts."""
+        with contextlib.suppress(LinkError, CommandError):
+            self._send_no_reply("speed_control", self._speed_fields(*self._drag_speed))
+
+    def _zero_and_release(self) -> None:
+        """After the drag: zero speed, then release speed control."""
+        for ctrl in (SPEED_TAKE_OVER, SPEED_RELEASE):
+            with contextlib.suppress(LinkError, CommandError):
+                self._send_no_reply(
+                    "speed_control",
+                    {"yaw_speed": 0, "roll_speed": 0, "pitch_speed": 0, "ctrl_byte": ctrl},
+                )
 
     async def _aim(self, data: CameraAim) -> CallResult:
         s = self.settings
