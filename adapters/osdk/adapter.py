@@ -37,7 +37,7 @@ import asyncio
 import contextlib
 import logging
 import math
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -69,7 +69,6 @@ from adapters.supervision import SupervisedAdapter
 from adapters.wire.layout import LayoutError
 from adapters.wire.stream import BadFrame
 from adapters.wire.table import bind_handlers
-from schemas.base import InboundModel
 from schemas.envelope import EmptyRequest
 from schemas.results import ResultCode, ground_station_ack
 from schemas.services import FlightAuthorityGrab, FlyToPoint, FlyToPointStop, TakeoffToPoint
@@ -198,7 +197,7 @@ class AircraftAdapter(SupervisedAdapter):
             "fly_to_point": self._fly_to_point,
             "fly_to_point_stop": self._fly_to_point_stop,
             "takeoff_to_point": self._takeoff_to_point,
-            **{method: self._extension(method) for method in _EXTENSION_CALLS},
+            **{method: self._online_only(call) for method, call in self._extension_calls().items()},
         }
 
     # -- life cycle -------------------------------------------------------------------------------
@@ -922,149 +921,137 @@ class AircraftAdapter(SupervisedAdapter):
             return
         await self._watch(task)
 
-    def _extension(self, method: str) -> Handler:
-        async def call(data: InboundModel) -> CallResult:
+    def _online_only(self, call: Handler) -> Handler:
+        async def checked(data: Any) -> CallResult:
             self._require_online()
-            return await _EXTENSION_CALLS[method](self, data)
+            return await call(data)
 
-        return call
+        return checked
 
+    # -- extension services: method → coroutine(data) ------------------------------------------------
 
-# -- extension services: method → coroutine(adapter, data) ---------------------------------------------
+    def _extension_calls(self) -> dict[str, Handler]:
+        """Extension method → its coroutine on this adapter (each behind :meth:`_online_only`). The
+        request model each takes is the one its method is registered with (extensions.EXTENSIONS),
+        validated by the dispatcher before the call."""
+        return {
+            "x_osdk_waypoint_pause": lambda d: self._ext_pause("wp_pause_resume", d),
+            "x_osdk_waypoint_idle_velocity_set": self._ext_idle_set,
+            "x_osdk_waypoint_idle_velocity_get": self._ext_idle_get,
+            "x_osdk_mission_download": self._ext_download,
+            "x_osdk_hotpoint_start": self._ext_hotpoint,
+            "x_osdk_hotpoint_stop": lambda d: self._ext_plain("hp_stop"),
+            "x_osdk_hotpoint_pause": lambda d: self._ext_pause("hp_pause_resume", d),
+            "x_osdk_hotpoint_velocity_set": lambda d: self._ext_plain(
+                "hp_set_idle_velocity", {"is_clockwise": 1 if d.clockwise else 0, "idle_velocity": d.velocity}
+            ),
+            "x_osdk_hotpoint_radius_set": lambda d: self._ext_plain("hp_set_radius", {"radius": d.radius}),
+            "x_osdk_hotpoint_reset_yaw": lambda d: self._ext_plain("hp_reset_yaw"),
+            "x_osdk_hotpoint_download": self._ext_hotpoint_download,
+            "x_osdk_hotpoint_auto_radius": lambda d: self._ext_plain(
+                "hp_auto_radius", {"on_off": 1 if d.enable else 0, "rate": d.rate}
+            ),
+            "x_osdk_followme_start": self._ext_followme,
+            "x_osdk_followme_stop": lambda d: self._ext_plain("fm_stop"),
+            "x_osdk_followme_pause": lambda d: self._ext_pause("fm_pause_resume", d),
+            "x_osdk_followme_target": self._ext_followme_target,
+            "x_osdk_land": lambda d: self._ext_task("landing"),
+            "x_osdk_go_home": lambda d: self._ext_task("go_home"),
+            "x_osdk_authority_release": self._ext_release,
+        }
 
+    async def _ext_pause(self, name: str, data: Pause) -> CallResult:
+        await self._gs(name, {"pause": 0 if data.pause else 1})
+        return CallResult()
 
-async def _ext_pause(adapter: AircraftAdapter, name: str, data: Pause) -> CallResult:
-    await adapter._gs(name, {"pause": 0 if data.pause else 1})
-    return CallResult()
+    async def _ext_plain(self, name: str, fields: Mapping[str, Any] | None = None) -> CallResult:
+        await self._gs(name, fields or {"arbitrary": 0})
+        return CallResult()
 
+    async def _ext_idle_set(self, data: IdleVelocity) -> CallResult:
+        msg = await self._gs("wp_set_idle_velocity", {"idle_velocity": data.velocity})
+        return CallResult(0, {"idle_velocity": float(msg.fields["idle_velocity"])})
 
-async def _ext_plain(
-    adapter: AircraftAdapter, name: str, fields: Mapping[str, Any] | None = None
-) -> CallResult:
-    await adapter._gs(name, fields or {"arbitrary": 0})
-    return CallResult()
+    async def _ext_idle_get(self, data: EmptyRequest) -> CallResult:
+        msg = await self._gs("wp_get_idle_velocity", {"arbitrary": 0})
+        return CallResult(0, {"idle_velocity": float(msg.fields["idle_velocity"])})
 
+    async def _ext_download(self, data: EmptyRequest) -> CallResult:
+        init = await self._gs("wp_download_init", {"arbitrary": 0})
+        points = []
+        for index in range(int(init.fields["length"])):
+            wp = await self._gs("wp_download_point", {"index": index})
+            f = wp.fields
+            points.append(
+                {
+                    "index": int(f["index"]),
+                    "latitude": math.degrees(f["latitude"]),
+                    "longitude": math.degrees(f["longitude"]),
+                    "altitude": float(f["altitude"]),
+                }
+            )
+        out = {
+            "length": int(init.fields["length"]),
+            "idle_velocity": float(init.fields["idle_vel"]),
+            "action_on_finish": int(init.fields["action_on_finish"]),
+            "points": points,
+        }
+        return CallResult(0, out)
 
-async def _ext_idle_set(adapter: AircraftAdapter, data: IdleVelocity) -> CallResult:
-    msg = await adapter._gs("wp_set_idle_velocity", {"idle_velocity": data.velocity})
-    return CallResult(0, {"idle_velocity": float(msg.fields["idle_velocity"])})
+    async def _ext_hotpoint(self, data: HotpointStart) -> CallResult:
+        fields = {
+            "version": 0,
+            "hp_latitude": math.radians(data.latitude),
+            "hp_longitude": math.radians(data.longitude),
+            "hp_altitude": data.altitude,
+            "hp_radius": data.radius,
+            "angle_rate": data.angle_rate,
+            "is_clockwise": 1 if data.clockwise else 0,
+            "start_point_position": data.start_point,
+            "yaw_mode": data.yaw_mode,
+        }
+        msg = await self._gs("hp_upload_start", fields)
+        return CallResult(0, {"max_radius": float(msg.fields.get("max_radius", 0.0))})
 
+    async def _ext_hotpoint_download(self, data: EmptyRequest) -> CallResult:
+        f = (await self._gs("hp_download", {"arbitrary": 0})).fields
+        out = {
+            "latitude": math.degrees(f["hp_latitude"]),
+            "longitude": math.degrees(f["hp_longitude"]),
+            "altitude": float(f["hp_altitude"]),
+            "radius": float(f["hp_radius"]),
+            "angle_rate": float(f["angle_rate"]),
+            "clockwise": bool(f["is_clockwise"]),
+        }
+        return CallResult(0, out)
 
-async def _ext_idle_get(adapter: AircraftAdapter, data: EmptyRequest) -> CallResult:
-    msg = await adapter._gs("wp_get_idle_velocity", {"arbitrary": 0})
-    return CallResult(0, {"idle_velocity": float(msg.fields["idle_velocity"])})
+    async def _ext_followme(self, data: FollowMeStart) -> CallResult:
+        fields = {
+            "follow_mode": 0,
+            "yaw_mode": 1 if data.point_to_target else 0,
+            "init_latitude": math.radians(data.latitude),
+            "init_longitude": math.radians(data.longitude),
+            "init_alti": data.altitude,
+        }
+        await self._gs("fm_upload_start", fields)
+        return CallResult()
 
+    async def _ext_followme_target(self, data: FollowMeTarget) -> CallResult:
+        fields = {"latitude": math.radians(data.latitude), "longitude": math.radians(data.longitude),
+                  "altitude": data.altitude}  # fmt: skip
+        await self.command("fm_update_target", fields)  # no ACK: the send is the result
+        return CallResult()
 
-async def _ext_download(adapter: AircraftAdapter, data: EmptyRequest) -> CallResult:
-    init = await adapter._gs("wp_download_init", {"arbitrary": 0})
-    points = []
-    for index in range(int(init.fields["length"])):
-        wp = await adapter._gs("wp_download_point", {"index": index})
-        f = wp.fields
-        points.append(
-            {
-                "index": int(f["index"]),
-                "latitude": math.degrees(f["latitude"]),
-                "longitude": math.degrees(f["longitude"]),
-                "altitude": float(f["altitude"]),
-            }
-        )
-    out = {
-        "length": int(init.fields["length"]),
-        "idle_velocity": float(init.fields["idle_vel"]),
-        "action_on_finish": int(init.fields["action_on_finish"]),
-        "points": points,
-    }
-    return CallResult(0, out)
+    async def _ext_task(self, task: str) -> CallResult:
+        await self._flight_task(task)
+        return CallResult()
 
+    async def _ext_release(self, data: EmptyRequest) -> CallResult:
+        await self._obtain(0)
+        if self._sink is not None:
+            self._sink.authority_lost(self.info.sn)
+        return CallResult()
 
-async def _ext_hotpoint(adapter: AircraftAdapter, data: HotpointStart) -> CallResult:
-    fields = {
-        "version": 0,
-        "hp_latitude": math.radians(data.latitude),
-        "hp_longitude": math.radians(data.longitude),
-        "hp_altitude": data.altitude,
-        "hp_radius": data.radius,
-        "angle_rate": data.angle_rate,
-        "is_clockwise": 1 if data.clockwise else 0,
-        "start_point_position": data.start_point,
-        "yaw_mode": data.yaw_mode,
-    }
-    msg = await adapter._gs("hp_upload_start", fields)
-    return CallResult(0, {"max_radius": float(msg.fields.get("max_radius", 0.0))})
-
-
-async def _ext_hotpoint_download(adapter: AircraftAdapter, data: EmptyRequest) -> CallResult:
-    f = (await adapter._gs("hp_download", {"arbitrary": 0})).fields
-    out = {
-        "latitude": math.degrees(f["hp_latitude"]),
-        "longitude": math.degrees(f["hp_longitude"]),
-        "altitude": float(f["hp_altitude"]),
-        "radius": float(f["hp_radius"]),
-        "angle_rate": float(f["angle_rate"]),
-        "clockwise": bool(f["is_clockwise"]),
-    }
-    return CallResult(0, out)
-
-
-async def _ext_followme(adapter: AircraftAdapter, data: FollowMeStart) -> CallResult:
-    fields = {
-        "follow_mode": 0,
-        "yaw_mode": 1 if data.point_to_target else 0,
-        "init_latitude": math.radians(data.latitude),
-        "init_longitude": math.radians(data.longitude),
-        "init_alti": data.altitude,
-    }
-    await adapter._gs("fm_upload_start", fields)
-    return CallResult()
-
-
-async def _ext_followme_target(adapter: AircraftAdapter, data: FollowMeTarget) -> CallResult:
-    fields = {"latitude": math.radians(data.latitude), "longitude": math.radians(data.longitude),
-              "altitude": data.altitude}  # fmt: skip
-    await adapter.command("fm_update_target", fields)  # no ACK: the send is the result
-    return CallResult()
-
-
-async def _ext_task(adapter: AircraftAdapter, task: str) -> CallResult:
-    await adapter._flight_task(task)
-    return CallResult()
-
-
-async def _ext_release(adapter: AircraftAdapter, data: EmptyRequest) -> CallResult:
-    await adapter._obtain(0)
-    if adapter._sink is not None:
-        adapter._sink.authority_lost(adapter.info.sn)
-    return CallResult()
-
-
-#: the request model each coroutine takes is the one its method is registered with (extensions.EXTENSIONS),
-#: validated by the dispatcher before the call
-_EXTENSION_CALLS: dict[str, Callable[[AircraftAdapter, Any], Awaitable[CallResult]]] = {
-    "x_osdk_waypoint_pause": lambda a, d: _ext_pause(a, "wp_pause_resume", d),
-    "x_osdk_waypoint_idle_velocity_set": _ext_idle_set,
-    "x_osdk_waypoint_idle_velocity_get": _ext_idle_get,
-    "x_osdk_mission_download": _ext_download,
-    "x_osdk_hotpoint_start": _ext_hotpoint,
-    "x_osdk_hotpoint_stop": lambda a, d: _ext_plain(a, "hp_stop"),
-    "x_osdk_hotpoint_pause": lambda a, d: _ext_pause(a, "hp_pause_resume", d),
-    "x_osdk_hotpoint_velocity_set": lambda a, d: _ext_plain(
-        a, "hp_set_idle_velocity", {"is_clockwise": 1 if d.clockwise else 0, "idle_velocity": d.velocity}
-    ),
-    "x_osdk_hotpoint_radius_set": lambda a, d: _ext_plain(a, "hp_set_radius", {"radius": d.radius}),
-    "x_osdk_hotpoint_reset_yaw": lambda a, d: _ext_plain(a, "hp_reset_yaw"),
-    "x_osdk_hotpoint_download": _ext_hotpoint_download,
-    "x_osdk_hotpoint_auto_radius": lambda a, d: _ext_plain(
-        a, "hp_auto_radius", {"on_off": 1 if d.enable else 0, "rate": d.rate}
-    ),
-    "x_osdk_followme_start": _ext_followme,
-    "x_osdk_followme_stop": lambda a, d: _ext_plain(a, "fm_stop"),
-    "x_osdk_followme_pause": lambda a, d: _ext_pause(a, "fm_pause_resume", d),
-    "x_osdk_followme_target": _ext_followme_target,
-    "x_osdk_land": lambda a, d: _ext_task(a, "landing"),
-    "x_osdk_go_home": lambda a, d: _ext_task(a, "go_home"),
-    "x_osdk_authority_release": _ext_release,
-}
 
 # push → handler, as the table's entries name them (a missing method fails here, at import)
 _PUSHES = bind_handlers(AircraftAdapter, cmds.COMMAND_TABLE)
