@@ -31,6 +31,8 @@ def test_variants_filter_lookups_and_name_the_variant_in_errors() -> None:
     assert [s.cmd_id for s in table.at((1, 1), None)] == [1] and table.at((1, 1), "new") == ()
     with pytest.raises(UnknownCommandError, match="unknown command 'z'; valid: x, y"):
         table.named("z")
+    plain = Table([_spec("y", 3)])  # no variants: every variant asked for finds its entries
+    assert plain.named("y", "2024").cmd_id == 3 and plain.at((1, 3), "2024") == plain.at((1, 3))
     with pytest.raises(ValueError, match="'newer' is not one of"):
         Table([_spec("x", 1, "newer")], variants=("old", "new"))
 

@@ -155,7 +155,7 @@ class Table:
     ``variant_noun`` names the variants in messages ("firmware", "season"); ``variants`` lists them
     (empty: the family has none)."""
 
-    __slots__ = ("by_key", "by_name", "names", "specs", "variant_noun", "variants")
+    __slots__ = ("_at", "_named", "by_key", "by_name", "names", "specs", "variant_noun", "variants")
 
     def __init__(
         self, specs: Iterable[CommandSpec], *, variants: Sequence[str] = (), variant_noun: str = "variant"
@@ -171,15 +171,29 @@ class Table:
         for s in self.specs:
             if s.variant is not None and s.variant not in self.variants:
                 raise ValueError(f"{s.name}: {variant_noun} {s.variant!r} is not one of {self.variants}")
+        # lookups are on every frame's path: answered from dicts built once
+        self._at: dict[tuple[tuple[int | None, int], str | None], tuple[CommandSpec, ...]] = {}
+        self._named: dict[tuple[str, str | None], CommandSpec] = {}
+        for variant in (None, *self.variants):
+            for key, group in self.by_key.items():
+                self._at[key, variant] = tuple(s for s in group if s.fits(variant))
+            for name, group in self.by_name.items():
+                fit = [s for s in group if s.fits(variant)]
+                if fit:
+                    self._named[name, variant] = fit[0]
 
     def unknown(self, name: str) -> UnknownCommandError:
         return UnknownCommandError(f"unknown command {name!r}; valid: {', '.join(self.names)}", name=name)
 
     def named(self, name: str, variant: str | None = None) -> CommandSpec:
         """The entry called ``name`` in ``variant`` (the first, when several fit)."""
-        for spec in self.by_name.get(name, ()):
-            if spec.fits(variant):
-                return spec
+        spec = self._named.get((name, variant))
+        if spec is not None:
+            return spec
+        if variant is not None and variant not in self.variants:  # a variant this table does not list
+            for spec in self.by_name.get(name, ()):
+                if spec.fits(variant):
+                    return spec
         if name in self.by_name:
             raise UnknownCommandError(
                 f"command {name!r} does not exist on {self.variant_noun} {variant!r}", name=name
@@ -188,7 +202,10 @@ class Table:
 
     def at(self, key: tuple[int | None, int], variant: str | None = None) -> tuple[CommandSpec, ...]:
         """The entries at ``key`` that exist in ``variant``, in decode-preference order."""
-        return tuple(s for s in self.by_key.get(key, ()) if s.fits(variant))
+        found = self._at.get((key, variant))
+        if found is None:
+            return tuple(s for s in self.by_key.get(key, ()) if s.fits(variant))  # a variant not listed
+        return found
 
 
 _T = TypeVar("_T")
