@@ -557,6 +557,10 @@ REFEREE_TABLE = Table(_REFEREE_SPECS, variants=SEASONS, variant_noun="season")
 """The referee payloads: one entry per (cmd_id, season)."""
 REFEREE_COMMANDS: dict[int, str] = {s.cmd_id: s.name for s in _REFEREE_SPECS}
 """cmd_id -> its name (the same in every season)."""
+# season -> cmd_id -> entry: the decode path's index into REFEREE_TABLE
+_BY_SEASON: dict[str, dict[int, CommandSpec]] = {
+    season: {s.cmd_id: s for s in REFEREE_TABLE.specs if s.variant == season} for season in SEASONS
+}
 
 
 # --------------------------------------------------------------------------- control messages
@@ -692,10 +696,9 @@ def decode_payload(
     data = bytes(data)
     if control.carries(cmd_id, data):
         return _decode_control(control, data)
-    found = REFEREE_TABLE.at((None, cmd_id), season)
-    if not found:
+    entry = _BY_SEASON[season].get(cmd_id)
+    if entry is None:
         raise UnknownCommandError(f"unknown cmd_id 0x{cmd_id:04X} ({len(data)}-byte payload)", cmd_id=cmd_id)
-    entry = found[0]
     codecs = entry.request
     for codec in codecs:
         lo, hi = size_range(codec)

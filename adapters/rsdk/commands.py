@@ -831,7 +831,7 @@ def lookup(command: str | tuple[int, int], *, reply: bool = False) -> CommandSpe
     """Entry by name, or by (cmd_set, cmd_id) (the first entry at the key; with ``reply``, the first
     one that has a reply frame). Raises CommandError listing the valid names."""
     if isinstance(command, str):
-        return COMMAND_TABLE.named(command)
+        return BY_NAME.get(command) or COMMAND_TABLE.named(command)  # the latter raises, naming the valid
     entries = COMMAND_TABLE.at((command[0], command[1]))
     if not entries:
         raise UnknownCommandError(f"unknown command key {command!r}; valid names: {', '.join(COMMANDS)}")
@@ -879,8 +879,7 @@ def build_frame(
         cmd_type = 0 if reply else (DEFAULT_CMD_TYPE if wants_reply(spec, values) else 0x00)
     if reply and legacy:
         return Frame(None, None, payload, seq, cmd_type, True)
-    cmd_set, cmd_id = spec.set_and_id
-    return Frame(cmd_set, cmd_id, payload, seq, cmd_type, reply)
+    return Frame(spec.cmd_set, spec.cmd_id, payload, seq, cmd_type, reply)
 
 
 def encode_command(
