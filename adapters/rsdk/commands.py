@@ -868,7 +868,7 @@ def build_frame(
     codecs = spec.reply if reply else spec.request
     if not codecs:
         raise CommandError(f"{spec.name} has no reply frame (seed §{spec.section})")
-    values = {**spec.fixed, **fields} if not reply else dict(fields)
+    values = {**spec.fixed, **fields} if spec.fixed and not reply else dict(fields)
     if reply and legacy:
         values = _swap_legacy(spec.name, values, angle_order)
     try:
