@@ -469,3 +469,43 @@ def test_immediate_tasks_keep_to_their_execute_time(rig: dict[str, Any]) -> None
     r = cloud.service("flighttask_execute", {"flight_id": "late"})
     assert r["data"]["result"] == 319004 and "30 s" in r["data"]["output"]["reason"]
     assert rig["fc"].inspect(lambda m: m.in_air) is False
+
+
+def test_the_console_state_carries_the_route_progress_and_break_point(rig: dict[str, Any]) -> None:
+    """The web console's pushed document (gathered on the gateway's loop) names the task's route, which
+    route_view gives once with the KMZ's waypoints; progress and the break point follow the task."""
+    from gateway.web.state import ConsoleState
+
+    cloud, gw = rig["cloud"], rig["gw"]
+    console = ConsoleState(gw.app, frames=10, journal=10)
+    assert gw.call(console.gather)["wayline"] is None  # no task yet
+    kmz, coords = _route_kmz()
+    flight = str(uuid.uuid4())
+    assert _prepare(rig, flight, kmz)["data"]["result"] == 0
+    shown = gw.call(console.gather)["wayline"]
+    assert shown["flight_id"] == flight and shown["sn"] == SN and shown["status"] == "sent"
+    assert shown["route"] == f"{flight}:{md5_hex(kmz)}" and (shown["reached"], shown["total"]) == (0, 3)
+    assert shown["break_point"] is None
+    route = gw.call(lambda: console.route_view(flight))
+    assert route["key"] == shown["route"] and route["total"] == 3 and not route["decimated"]
+    assert [w[0] for w in route["waypoints"]] == [0, 1, 2]
+    for (_, lat, lon, height), (want_lat, want_lon) in zip(route["waypoints"], coords, strict=True):
+        assert abs(lat - want_lat) < 1e-7 and abs(lon - want_lon) < 1e-7 and height == HEIGHT  # 8 decimals
+    assert "waypoints" not in shown  # the route is not pushed with every tick
+    assert cloud.service("flighttask_execute", {"flight_id": flight})["data"]["result"] == 0
+    seen: list[int] = []
+
+    def past_first() -> bool:
+        view = gw.call(console.gather)["wayline"]
+        seen.append(view["reached"])
+        return bool(view["status"] == "in_progress" and view["reached"] >= 2)
+
+    wait_until(past_first, 60, what="the console's task past waypoint 1")
+    assert seen == sorted(seen) and seen[-1] > seen[0]  # reached only grows
+    assert gw.call(console.gather)["wayline"]["percent"] > 10
+    assert cloud.service("return_home", None)["data"]["result"] == 0
+    wait_until(lambda: gw.call(console.gather)["wayline"]["status"] == "canceled", 5, what="task canceled")
+    ended = gw.call(console.gather)["wayline"]
+    bp = _progress(cloud, flight)[-1]["data"]["output"]["ext"]["break_point"]
+    assert ended["break_point"] == bp and bp["break_reason"] == 1283
+    assert ended["route"] == shown["route"]  # the same route: the page does not fetch it again

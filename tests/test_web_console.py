@@ -513,3 +513,54 @@ def test_the_gateway_s_own_emergency_stop_holds_the_session_and_answers_nobody()
     drc, outbox = asyncio.run(scenario())
     assert drc.snapshot()["emergency_stop"] is True and drc.failsafe[0] == "emergency_stop"
     assert not [p for p in outbox.payloads() if b"drone_emergency_stop" in p]
+
+
+def test_a_long_wayline_route_is_decimated_for_the_map_and_built_once() -> None:
+    """A 100,000-waypoint route: the page gets at most ROUTE_POINTS waypoints (first and last kept, each
+    with its index in the route), once per task/version; the push carries only the progress."""
+    from types import SimpleNamespace
+
+    from adapters.wayline.kmz import MissionConfig, Placemark, Route, Wayline
+    from gateway.wayline.task import TaskBook
+    from gateway.web.state import ROUTE_POINTS, ConsoleState
+
+    def point(i: int) -> Placemark:
+        return Placemark(i, 22.5 + i * 1e-6, 113.9, 30.0, None, None, None, None, None, None, None)
+
+    lines = tuple(
+        Wayline(w, 0, 10.0, "relativeToStartPoint", tuple(point(w * 50_000 + i) for i in range(50_000)))
+        for w in range(2)
+    )
+    config = MissionConfig("safely", "goHome", "goContinue", None, 20.0, 10.0, None)
+    route = Route("wpml", config, lines)
+    book = TaskBook()
+    task, _ = book.prepare(SimpleNamespace(flight_id="long-1"), 0.0)
+    calls: list[str] = []
+
+    class Service:  # the two queries ConsoleState makes of gateway.wayline.service.WaylineService
+        def __init__(self) -> None:
+            self.book = book
+
+        def aircraft_sn(self) -> str:
+            return "OSDK-1"
+
+        def route_of(self, flight_id: str) -> tuple[str, Route] | None:
+            calls.append(flight_id)
+            return ("abc", route) if flight_id == "long-1" else None
+
+    console = ConsoleState(SimpleNamespace(wayline=Service()), frames=1, journal=1)
+    view = console.route_view("long-1")
+    assert view is not None and view["total"] == 100_000 and view["decimated"]
+    indices = [w[0] for w in view["waypoints"]]
+    assert len(indices) <= ROUTE_POINTS and indices[0] == 0 and indices[-1] == 99_999
+    assert indices == sorted(indices) and view["offsets"] == {"0": 0, "1": 50_000}
+    assert view["waypoints"][-1][1:] == [22.5 + 99_999 * 1e-6, 113.9, 30.0]
+    assert console.route_view("long-1") is view  # built once per key
+    book.execute("long-1", 1.0)
+    book.planned(task, 100_000)
+    book.entered(task)
+    book.reached(task, 1, 9, 0)  # the 10th waypoint of the second wayline
+    shown = console._wayline()
+    assert shown is not None and shown["reached"] == 50_010 and shown["total"] == 100_000
+    assert len(json.dumps(shown)) < 1000  # what is pushed at push_hz stays small
+    assert console.route_view("other") is None

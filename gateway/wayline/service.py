@@ -140,6 +140,7 @@ class WaylineService:
         self._ready_sent: set[str] = set()
         self._stops: set[asyncio.Task[None]] = set()  # time-out stops in flight
         self._rth: dict[str, Any] | None = None  # the way home being flown: path, flight_id
+        self._flown: dict[str, _File] = {}  # the file each run flies (a fresh URL may replace the prepared)
         self._last_rth_altitude = DEFAULT_RTH_ALTITUDE
 
     # -- the aircraft ----------------------------------------------------------------------------
@@ -149,6 +150,21 @@ class WaylineService:
             if getattr(adapter, "wayline", None) is not None:
                 return adapter
         return None
+
+    def aircraft_sn(self) -> str | None:
+        aircraft = self._aircraft()
+        return aircraft.info.sn if aircraft is not None else None
+
+    def route_of(self, flight_id: str) -> tuple[str, Route] | None:
+        """The task's route and its fingerprint (the one flown, else the prepared one once downloaded),
+        for the web console; None while it is being fetched or when it could not be."""
+        file = self._flown.get(flight_id)
+        if file is None:
+            prepared = self._files.get(flight_id)
+            if prepared is None or not prepared.done() or prepared.cancelled() or prepared.exception():
+                return None
+            file = prepared.result()
+        return file.fingerprint, file.route
 
     # -- services --------------------------------------------------------------------------------
     async def call(self, method: str, data: InboundModel) -> Result:
@@ -329,7 +345,7 @@ class WaylineService:
         try:
             book.step(task, STEP_URL, 2)
             self._emit(task)
-            file = await self._fresh_file(aircraft, task)
+            file = self._flown[task.flight_id] = await self._fresh_file(aircraft, task)
             if file.route.config.global_rth_height and req.rth_altitude is None:
                 self._last_rth_altitude = file.route.config.global_rth_height
             plan = self._plan(aircraft, file.route, req)
@@ -482,6 +498,8 @@ class WaylineService:
                 )
                 self._stops.add(stop)
                 stop.add_done_callback(self._stops.discard)
+        for gone in [f for f in self._flown if f not in self.book.tasks]:
+            del self._flown[gone]  # forgotten by the book (PREPARE_TTL): the console no longer shows it
         ready = [f for f, t in self.book.tasks.items() if self._ready(aircraft, t)]
         if ready:
             self._ready_sent.update(ready)

@@ -208,6 +208,7 @@ class WebServer:
             r.add_delete("/api/session", self._session_delete)
             r.add_get("/api/catalog", self._catalog)
             r.add_get("/api/tracks", self._tracks)
+            r.add_get("/api/wayline/{flight_id}", self._wayline_route)
             r.add_post("/api/action", self._action)
             r.add_post("/api/estop", self._estop)
             r.add_get("/api/frames/{sn}", self._frames_download)
@@ -407,6 +408,17 @@ class WebServer:
         if denied is not None:
             return self._refuse(denied)
         return web.json_response(await self._on_gateway(self.state.track_view), dumps=_dumps)
+
+    async def _wayline_route(self, request: web.Request) -> web.Response:
+        """A wayline task's route for the map (fetched once per task/version, never pushed)."""
+        denied = self._viewer(request)
+        if denied is not None:
+            return self._refuse(denied)
+        flight_id = request.match_info["flight_id"]
+        view = await self._on_gateway(lambda: self.state.route_view(flight_id))
+        if view is None:
+            return web.json_response({"reason": f"no route for wayline task {flight_id!r}"}, status=404)
+        return web.json_response(view, dumps=_dumps)
 
     async def _frames_download(self, request: web.Request) -> web.Response:
         denied = self._viewer(request)

@@ -2,10 +2,12 @@
 
 Owns :class:`ConsoleState`: the JSON document the page is pushed (every device with its link, online
 flag, traffic, errors, last-heard age, authority, firmware, ``osd``/``state`` bodies; the broker
-connection(s); the live-control session with its heartbeat history; the fly-to target), the tracks and
-home points the map draws, the frame inspectors and the journal. :meth:`ConsoleState.gather` runs **on
-the gateway's event loop** (the web server asks for it once per push tick, with a deadline), so it
-reads the live objects without locks; it must stay cheap (no I/O, no decoding).
+connection(s); the live-control session with its heartbeat history; the fly-to target; the wayline
+task's progress and break point), the tracks and home points and the wayline route (built once per
+task/version, decimated to ROUTE_POINTS, fetched by the page, never pushed) the map draws, the frame
+inspectors and the journal. :meth:`ConsoleState.gather` runs **on the gateway's event loop** (the web
+server asks for it once per push tick, with a deadline), so it reads the live objects without locks; it
+must stay cheap (no I/O, no decoding).
 
 Reads adapters through their contract (:class:`adapters.base.Adapter`: ``link_stats()``,
 ``observe_link()`` for the frame tap, ``last_heard``, the ``osd``/``state`` snapshots); the firmware
@@ -33,6 +35,10 @@ TRACK_POINTS = 600
 TRACK_STEP_M = 0.5
 #: heartbeats sent with each push (the DRC panel's chart)
 HEARTBEAT_POINTS = 60
+#: waypoints of a wayline route sent to the page for drawing (a longer route is decimated: every k-th
+#: waypoint, the first and the last kept, each with its index in the route)
+ROUTE_POINTS = 2000
+NO_WAYLINE = 65535
 _EARTH_M = 6_371_000.0
 
 
@@ -57,6 +63,7 @@ class ConsoleState:
         self.inspectors: dict[str, LinkInspector] = {}
         self.tracks: dict[str, deque[tuple[float, float]]] = {}
         self.home: dict[str, tuple[float, float]] = {}
+        self._route: dict[str, Any] | None = None  # the drawn route of the shown wayline task (one kept)
 
     def attach(self) -> None:
         """Start observing the app (on its loop, before it publishes): the journal hears every message,
@@ -109,6 +116,7 @@ class ConsoleState:
             "devices": devices,
             "drc": self._drc(drc),
             "mission": self.journal.mission,
+            "wayline": self._wayline(),
             "t": self._wall.time_ms(),
         }
 
@@ -207,6 +215,78 @@ class ConsoleState:
         view["failsafe_at"] = drc.failsafe[1] if drc.failsafe is not None else None
         view["failsafe_reason"] = drc.failsafe[0] if drc.failsafe is not None else None
         return view
+
+    # -- the wayline task (the route itself is fetched once per task/version: route_view) -------------
+    def _shown_task(self) -> Any:
+        """The running or paused task, else the one started (or prepared) last; None without one."""
+        service = getattr(self.app, "wayline", None)
+        if service is None or not service.book.tasks:
+            return None
+        active = service.book.active
+        if active is not None:
+            return active
+        return max(service.book.tasks.values(), key=lambda t: t.started_at or t.prepared_at)
+
+    def _wayline(self) -> dict[str, Any] | None:
+        """The shown task's progress (small: pushed every tick); ``route`` names the route to fetch."""
+        task = self._shown_task()
+        if task is None:
+            return None
+        route = self.route_view(task.flight_id)
+        reached = 0
+        if route is not None:
+            if task.status == "ok":
+                reached = route["total"]
+            elif task.wayline_id != NO_WAYLINE:
+                offset = route["offsets"].get(str(task.wayline_id), 0)
+                reached = min(route["total"], offset + task.waypoint_index)
+        return {
+            "sn": self.app.wayline.aircraft_sn(),
+            "flight_id": task.flight_id,
+            "status": task.status,
+            "result": task.result,
+            "reason": task.reason,
+            "percent": task.percent,
+            "step": task.step,
+            "wayline_id": task.wayline_id,
+            "waypoint_index": task.waypoint_index,
+            "reached": reached,
+            "total": route["total"] if route is not None else None,
+            "break_point": task.break_point,
+            "route": route["key"] if route is not None else None,
+        }
+
+    def route_view(self, flight_id: str) -> dict[str, Any] | None:
+        """The task's route for drawing: ``waypoints`` as ``[index, lat, lon, height]`` (at most
+        ROUTE_POINTS of them), ``total``, ``offsets`` (a wayline's first index), ``key`` (flight id and
+        file fingerprint: the page fetches again when it changes). Built once per key."""
+        service = getattr(self.app, "wayline", None)
+        found = service.route_of(flight_id) if service is not None else None
+        if found is None:
+            return None
+        fingerprint, route = found
+        key = f"{flight_id}:{fingerprint}"
+        if self._route is not None and self._route["key"] == key:
+            return self._route
+        points: list[tuple[float, float, float]] = []
+        offsets: dict[str, int] = {}
+        for wayline in route.waylines:
+            offsets[str(wayline.wayline_id)] = len(points)
+            points += [(p.latitude, p.longitude, p.execute_height) for p in wayline.placemarks]
+        stride = max(1, math.ceil(len(points) / ROUTE_POINTS))
+        kept = list(range(0, len(points), stride))
+        if points and kept[-1] != len(points) - 1:
+            kept[-1] = len(points) - 1  # the last waypoint is drawn (ROUTE_POINTS stays the bound)
+        self._route = {
+            "key": key,
+            "flight_id": flight_id,
+            "total": len(points),
+            "decimated": stride > 1,
+            "height_mode": route.waylines[0].execute_height_mode if route.waylines else None,
+            "offsets": offsets,
+            "waypoints": [[i, *points[i]] for i in kept],
+        }
+        return self._route
 
     def track_view(self) -> dict[str, Any]:
         """The trails and home points (the page asks once; pushes keep it current)."""

@@ -1,6 +1,9 @@
 // Map panel: the aircraft on a local metric grid (offline; map tiles under it when the config names a
-// tile URL), its trail, home point and the fly-to / take-off target; the robot on its field.
+// tile URL), its trail, home point and the fly-to / take-off target, or the wayline task's route (fetched
+// once per task/version from /api/wayline/<flight_id>, decimated by the gateway for a long route) with the
+// waypoints reached, the current target and the break point; the robot on its field.
 import { $, s, clear, fmt } from "./dom.js";
+import { get } from "./api.js";
 
 const R = 6371000;
 const W = 600;
@@ -10,6 +13,9 @@ let tileUrl = null;
 let origin = null; // [lat, lon] of the grid's 0,0: the first home point (or position) seen
 const tracks = new Map(); // sn -> [[a, b], ...] (lat/lon for aircraft, field metres for robots)
 const TRACK_POINTS = 600;
+const LABELS = 40; // waypoint numbers drawn (every k-th on a longer route)
+let route = null; // the drawn wayline route: {key, waypoints: [[index, lat, lon, height], ...], total}
+let routeAsked = null; // the key being fetched
 
 export function configure(config) {
   tileUrl = config && config.tile_url ? config.tile_url : null;
@@ -59,6 +65,59 @@ function targets(mission) {
   return [];
 }
 
+function wantRoute(wayline) {
+  const key = wayline && wayline.route;
+  if (!key) return;
+  if ((route && route.key === key) || routeAsked === key) return;
+  routeAsked = key;
+  get(`/api/wayline/${encodeURIComponent(wayline.flight_id)}`)
+    .then((view) => {
+      route = view;
+      drawn = ""; // redraw with the route
+    })
+    .catch(() => {})
+    .finally(() => {
+      if (routeAsked === key) routeAsked = null;
+    });
+}
+
+const live = (wayline) => ["sent", "in_progress", "paused"].includes(wayline.status);
+
+function shownRoute(wayline) {
+  return wayline && route && route.key === wayline.route ? route : null;
+}
+
+function drawRoute(svg, view, wayline, shown, aircraft) {
+  const reached = wayline.reached || 0;
+  const pts = shown.waypoints.map((w) => [w[0], view.px(local([w[1], w[2]]))]);
+  const line = (list) => list.map(([, p]) => p.map((v) => v.toFixed(1)).join(",")).join(" ");
+  const done = pts.filter(([i]) => i < reached);
+  const todo = pts.filter(([i]) => i >= reached - 1);
+  if (done.length > 1) svg.append(s("polyline", { points: line(done), class: "wayline done" }));
+  if (todo.length > 1) svg.append(s("polyline", { points: line(todo), class: "wayline todo" }));
+  const every = Math.max(1, Math.ceil(pts.length / LABELS));
+  pts.forEach(([i, [x, y]], k) => {
+    svg.append(s("circle", { cx: x, cy: y, r: 4, class: `waypoint ${i < reached ? "reached" : "remaining"}`, "data-index": i }));
+    if (k % every === 0 || k === pts.length - 1) svg.append(s("text", { x: x + 6, y: y - 6, class: "waypoint-label", text: String(i + 1) }));
+  });
+  const next = shown.waypoints.find((w) => w[0] >= reached);
+  if (next && aircraft && live(wayline)) {
+    const [tx, ty] = view.px(local([next[1], next[2]]));
+    const [ax, ay] = view.px(local([aircraft.osd.latitude, aircraft.osd.longitude]));
+    svg.append(s("line", { x1: ax, y1: ay, x2: tx, y2: ty, class: "route" }), s("circle", { cx: tx, cy: ty, r: 8, class: "target" }));
+    svg.dataset.waylineTarget = String(next[0]);
+  } else delete svg.dataset.waylineTarget;
+  const bp = wayline.break_point;
+  if (bp && typeof bp.latitude === "number") {
+    const [bx, by] = view.px(local([bp.latitude, bp.longitude]));
+    svg.append(s("g", { transform: `translate(${bx.toFixed(1)},${by.toFixed(1)})`, class: "break-point" },
+      s("rect", { x: -6, y: -6, width: 12, height: 12, class: "break-point" })),
+    s("text", { x: bx + 9, y: by + 14, text: `break point (after ${bp.index})` }));
+  }
+  svg.dataset.waypoints = String(shown.total);
+  svg.dataset.waypointsReached = String(reached);
+}
+
 function tileLayer(group, view) {
   const rad = Math.PI / 180;
   const lat0 = origin[0];
@@ -96,8 +155,12 @@ function renderAircraftMap(state) {
     svg.append(s("text", { x: 20, y: 30, text: "no aircraft position yet" }));
     return;
   }
-  const goals = targets(state.mission);
+  const wayline = state.wayline;
+  wantRoute(wayline);
+  const shown = shownRoute(wayline);
+  const goals = wayline && live(wayline) ? [] : targets(state.mission);
   const pts = [[0, 0]];
+  if (shown) for (const w of shown.waypoints) pts.push(local([w[1], w[2]]));
   for (const d of aircraft) {
     pts.push(local([d.osd.latitude, d.osd.longitude]));
     for (const p of tracks.get(d.sn) || []) pts.push(local(p));
@@ -131,6 +194,11 @@ function renderAircraftMap(state) {
   for (const d of aircraft) {
     const trail = (tracks.get(d.sn) || []).map((p) => view.px(local(p)).map((v) => v.toFixed(1)).join(",")).join(" ");
     if (trail.includes(" ")) svg.append(s("polyline", { points: trail, class: "track" }));
+  }
+  if (shown) drawRoute(svg, view, wayline, shown, aircraft[0]);
+  else {
+    delete svg.dataset.waypoints;
+    delete svg.dataset.waypointsReached;
   }
   let from = aircraft.length ? view.px(local([aircraft[0].osd.latitude, aircraft[0].osd.longitude])) : [hx, hy];
   for (const g of goals) {
@@ -182,7 +250,7 @@ function renderField(state) {
 let drawn = "";
 
 export function render(state) {
-  const key = JSON.stringify([state.mission, state.devices.map((d) => d.osd && [d.osd.latitude, d.osd.longitude,
+  const key = JSON.stringify([state.mission, state.wayline, route && route.key, state.devices.map((d) => d.osd && [d.osd.latitude, d.osd.longitude,
     d.osd.attitude_head, d.osd.elevation, d.osd.x_position, d.home])]);
   if (key === drawn) return;
   drawn = key;
@@ -190,6 +258,16 @@ export function render(state) {
   renderField(state);
   const m = state.mission;
   const el = $("#mission");
+  const w = state.wayline;
+  if (w && (!m || live(w))) {
+    const of = w.total ? ` · waypoint ${w.reached}/${w.total}` : "";
+    const bp = w.break_point ? ` · break point after waypoint ${w.break_point.index}` : "";
+    el.textContent = `wayline ${w.flight_id}: ${w.status} ${w.percent}%${of}${w.result ? ` · result ${w.result}` : ""}${bp}`;
+    el.dataset.waylineStatus = w.status;
+    el.dataset.waylinePercent = String(w.percent);
+    return;
+  }
+  delete el.dataset.waylineStatus;
   if (!m) {
     el.textContent = "no fly-to or take-off target";
     return;
