@@ -405,6 +405,65 @@ def test_map_tiles_come_from_the_configured_url(chromium: Any) -> None:
         server.server_close()
 
 
+def test_the_map_draws_a_wayline_task_and_its_progress(chromium: Any, tmp_path: Path) -> None:
+    """README "Fly a route" against ``run --simulate``: once prepared, the map draws the route's three
+    waypoints (from /api/wayline, not the push); executed, the reached count grows to 3 and the task
+    status reads ok at 100 %."""
+    import subprocess
+    import sys
+
+    bin_ = str(Path(sys.executable).parent / "dji-gateway")
+    env = {**{k: v for k, v in os.environ.items() if not k.startswith("DJIGW_")}, "PYTHONUNBUFFERED": "1"}
+    broker = LocalBroker(0).start()
+    proc, url = simulated_gateway(broker.url)
+
+    def cli(*args: str) -> str:
+        argv = [bin_, *args] + (["--gateway-sn", GW, "--broker", broker.url] if args[0] == "send" else [])
+        done = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=60, env=env)
+        assert done.returncode == 0, (done.stdout, done.stderr)
+        return done.stdout
+
+    page = chromium.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    try:
+        page.goto(url + "/")
+        page.wait_for_selector("#map-svg .aircraft-mark", timeout=10000)
+        assert page.locator("#map-svg circle.waypoint").count() == 0
+        cli("route-demo", "route.kmz")
+        cli("send", "flight_authority_grab")
+        assert '"result": 0' in cli("send", "flighttask_prepare", "file=route.kmz", "flight_id=route-1")
+        page.wait_for_selector("#map-svg circle.waypoint >> nth=2", state="attached", timeout=10000)
+        assert page.locator("#map-svg circle.waypoint").count() == 3
+        assert page.get_attribute("#map-svg", "data-waypoints") == "3"
+        drawn = page.locator("#map-svg circle.waypoint")
+        assert [drawn.nth(i).get_attribute("data-index") for i in range(3)] == ["0", "1", "2"]
+        assert page.locator("#map-svg circle.waypoint.reached").count() == 0
+        assert "route-1: sent" in page.inner_text("#mission")
+        cli("send", "flighttask_execute", "flight_id=route-1")
+        seen: list[int] = []
+
+        def reached() -> int:
+            seen.append(page.locator("#map-svg circle.waypoint.reached").count())
+            return seen[-1]
+
+        def flying() -> bool:
+            return reached() >= 1 and page.get_attribute("#mission", "data-wayline-status") == "in_progress"
+
+        wait_until(flying, 90, what="a waypoint reached in the page")
+        wait_until(lambda: page.get_attribute("#mission", "data-wayline-status") == "ok", 120, what="task ok")
+        assert reached() == 3 and page.get_attribute("#map-svg", "data-waypoints-reached") == "3"
+        assert seen == sorted(seen) and len(set(seen)) >= 2  # progress advanced in the page
+        text = page.inner_text("#mission")
+        assert "route-1: ok 100%" in text and "waypoint 3/3" in text, text
+        _shoot(page.locator("#map-svg"), tmp_path / "wayline.png")
+        assert not errors, errors
+    finally:
+        page.close()
+        assert proc.stop(timeout=20) == 0
+        broker.stop()
+
+
 def test_the_page_sends_no_secret_and_no_outside_request(chromium: Any, gateway: dict[str, Any]) -> None:
     """Everything the page loads comes from the gateway itself (no CDN), and no response carries the token."""
     page = chromium.new_page()
