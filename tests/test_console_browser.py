@@ -451,12 +451,12 @@ def test_the_map_draws_a_wayline_task_and_its_progress(chromium: Any, tmp_path: 
             return reached() >= 1 and page.get_attribute("#mission", "data-wayline-status") == "in_progress"
 
         wait_until(flying, 90, what="a waypoint reached in the page")
+        _shoot(page.locator("#map-svg"), _shots(tmp_path) / "map-wayline.png")  # reached and remaining
         wait_until(lambda: page.get_attribute("#mission", "data-wayline-status") == "ok", 120, what="task ok")
         assert reached() == 3 and page.get_attribute("#map-svg", "data-waypoints-reached") == "3"
         assert seen == sorted(seen) and len(set(seen)) >= 2  # progress advanced in the page
         text = page.inner_text("#mission")
         assert "route-1: ok 100%" in text and "waypoint 3/3" in text, text
-        _shoot(page.locator("#map-svg"), tmp_path / "wayline.png")
         assert not errors, errors
     finally:
         page.close()
