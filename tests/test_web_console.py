@@ -326,6 +326,10 @@ def test_the_console_refuses_a_foreign_host_and_serves_no_secret(rig: dict[str, 
     # the observability endpoints are unchanged
     assert request(port, "GET", "/healthz")[0] == 200
     assert request(port, "GET", "/nothing-here")[0] == 404
+    # a wayline route the gateway does not have (no task here): 404 saying so; a foreign Host: 403
+    status, body, _ = request(port, "GET", "/api/wayline/route-1")
+    assert status == 404 and "route-1" in body["reason"]
+    assert request(port, "GET", "/api/wayline/route-1", headers={"Host": "evil.example"})[0] == 403
 
 
 def test_read_only_and_tokenless_consoles(private_broker: LocalBroker, can_channel: str) -> None:
