@@ -62,7 +62,12 @@ class SystemClock:
         await asyncio.sleep(seconds)
 
     async def wait_for(self, aw: Awaitable[T], timeout: float) -> T:
-        return await asyncio.wait_for(aw, timeout)
+        if timeout <= 0:  # asyncio.wait_for's rule: not even started (asyncio.timeout would start it)
+            return await asyncio.wait_for(aw, timeout)
+        # in the caller's own task: asyncio.wait_for (Python 3.11) wraps a coroutine in a task of its
+        # own and hands its result back through a waiter future, three turns of the loop per wait
+        async with asyncio.timeout(timeout):
+            return await aw
 
 
 #: the default of every part that is not handed a clock

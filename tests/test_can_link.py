@@ -9,12 +9,15 @@ runs in the loop once they are on the bus; frames are received in order whatever
 from __future__ import annotations
 
 import asyncio
+import os
 import threading
+import time
 import uuid
 
 import can
+import pytest
 
-from adapters.rsdk.link import LOOP_READ, NONBLOCKING_SEND, CanLink
+from adapters.rsdk.link import LOOP_READ, NONBLOCKING_SEND, CanLink, virtual_sender
 
 
 def _link(loop: asyncio.AbstractEventLoop, channel: str, got: list[tuple[int, bytes, int]]) -> CanLink:
@@ -109,6 +112,153 @@ def test_virtual_link_reopens_and_reads_again() -> None:
                 link.close()
             assert [d for _, d, _ in got] == [b"\x00", b"\x01", b"\x02"]
         finally:
+            peer.shutdown()
+
+    asyncio.run(main())
+
+
+ROUNDS = 6000
+
+
+def test_frames_sent_one_by_one_are_never_stranded() -> None:
+    """A peer answering like a device (one to three frames, then a wait for the link to take them), many
+    times: the receive queue signals the loop once per batch, and no frame put while the loop is reading
+    is left behind without a signal (a frame put between the loop emptying the pipe and re-arming would
+    wait for the next frame that never comes)."""
+
+    async def main() -> None:
+        channel = f"link-{uuid.uuid4().hex[:6]}"
+        peer = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        got: list[tuple[int, bytes, int]] = []
+        link = _link(asyncio.get_running_loop(), channel, got)
+        await link.open()
+        stranded: list[int] = []
+
+        def device() -> None:
+            sent = 0
+            for round_ in range(ROUNDS):
+                burst = 1 + round_ % 3
+                for _ in range(burst):
+                    data = (sent % 65536).to_bytes(2, "big")
+                    peer.send(can.Message(arbitration_id=0x222, data=data, is_extended_id=False))
+                    sent += 1
+                # the next burst as soon as the loop is reading this one (all of it, every 10th round)
+                need = sent if round_ % 10 == 9 or round_ == ROUNDS - 1 else sent - burst + 1
+                deadline = time.monotonic() + 2.0
+                while len(got) < need:
+                    if time.monotonic() > deadline:
+                        stranded.append(round_)
+                        return
+                    time.sleep(0)
+
+        try:
+            await asyncio.to_thread(device)
+        finally:
+            link.close()
+            peer.shutdown()
+        assert not stranded, f"frames left in the queue without a signal at round {stranded[0]}"
+        assert [int.from_bytes(d, "big") for _, d, _ in got] == [i % 65536 for i in range(len(got))]
+        assert len(got) == sum(1 + r % 3 for r in range(ROUNDS))
+
+    asyncio.run(main())
+
+
+def _fields(msg: can.Message) -> tuple[object, ...]:
+    return (msg.arbitration_id, bytes(msg.data), msg.dlc, msg.is_extended_id, msg.is_error_frame,
+            msg.is_remote_frame, msg.is_fd, msg.is_rx, msg.channel)  # fmt: skip
+
+
+def test_virtual_sender_delivers_what_python_can_delivers() -> None:
+    """``virtual_sender`` (no deep copy per receiver) against python-can's own ``VirtualBus.send`` on the
+    same channel layout: every receiver gets the same fields (``is_rx``, ``channel``, a fresh timestamp),
+    its own object, and the sender's own queue a copy only with ``receive_own_messages``; a full receiver
+    and a closed bus fail the same way."""
+    for own in (False, True):
+        channel = f"vs-{uuid.uuid4().hex[:6]}"
+        sender = can.Bus(interface="virtual", channel=channel, receive_own_messages=own)
+        peers = [can.Bus(interface="virtual", channel=channel) for _ in range(2)]
+        put = virtual_sender(sender)
+        assert put is not None
+        try:
+            theirs: list[tuple[object, ...]] = []
+            ours: list[tuple[object, ...]] = []
+            for send, out in ((lambda m, bus=sender: bus.send(m, timeout=0), theirs), (put, ours)):
+                before = time.time()
+                send(can.Message(arbitration_id=0x223, data=b"\x01\x02\x03", is_extended_id=False))
+                got = [p.recv(1.0) for p in peers] + ([sender.recv(1.0)] if own else [])
+                assert all(m is not None and m.timestamp >= before for m in got)
+                assert len({id(m) for m in got}) == len(got)  # each receiver its own message
+                out.extend(_fields(m) for m in got if m is not None)
+                assert sender.recv(0) is None and all(p.recv(0) is None for p in peers)
+            assert ours == theirs
+        finally:
+            for bus in (*peers, sender):
+                bus.shutdown()
+
+    channel = f"vs-{uuid.uuid4().hex[:6]}"
+    sender = can.Bus(interface="virtual", channel=channel)
+    full = can.Bus(interface="virtual", channel=channel, rx_queue_size=1)
+    put = virtual_sender(sender)
+    assert put is not None
+    put(can.Message(arbitration_id=1, data=b"\x00"))
+    with pytest.raises(can.CanOperationError):
+        put(can.Message(arbitration_id=1, data=b"\x01"))
+    with pytest.raises(can.CanOperationError):
+        sender.send(can.Message(arbitration_id=1, data=b"\x02"), timeout=0)
+    full.shutdown()
+    sender.shutdown()
+    with pytest.raises(can.CanOperationError):
+        put(can.Message(arbitration_id=1, data=b"\x03"))
+    assert virtual_sender(can.Bus(interface="virtual", channel=channel)) is not None
+
+
+def test_a_frame_put_while_the_loop_empties_the_pipe_still_signals_the_next(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The race the stress test above can only hit by luck, made to happen: a device puts a frame just as
+    the loop empties the signal pipe (os.read releases the GIL). That frame is read in the same pass, and
+    the frame after it still wakes the loop: the receive queue must not be left marked as signalled with
+    an empty pipe (the pipe is emptied before the queue is re-armed, not after)."""
+
+    async def main() -> None:
+        channel = f"link-{uuid.uuid4().hex[:6]}"
+        peer = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        got: list[tuple[int, bytes, int]] = []
+        link = _link(asyncio.get_running_loop(), channel, got)
+        await link.open()
+        reader = link._reader
+        assert reader is not None
+
+        def frame(n: int) -> can.Message:
+            return can.Message(arbitration_id=0x222, data=bytes([n]), is_extended_id=False)
+
+        real_read = os.read
+        injected: list[int] = []
+
+        def read(fd: int, n: int) -> bytes:
+            if fd == reader.fd and not injected:
+                injected.append(fd)
+                peer.send(frame(1))  # from the device, in the middle of the loop's clear()
+            return real_read(fd, n)
+
+        async def until(count: int) -> bool:
+            for _ in range(200):
+                if len(got) >= count:
+                    return True
+                await asyncio.sleep(0.01)
+            return False
+
+        try:
+            monkeypatch.setattr(os, "read", read)
+            peer.send(frame(0))
+            assert await until(2) and injected
+            monkeypatch.undo()
+            peer.send(frame(2))
+            assert await until(3), "the frame after the race never woke the loop"
+            assert [d for _, d, _ in got] == [b"\x00", b"\x01", b"\x02"]
+        finally:
+            monkeypatch.undo()
+            link.close()
             peer.shutdown()
 
     asyncio.run(main())

@@ -26,6 +26,7 @@ import logging
 import os
 import queue
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -50,11 +51,13 @@ NONBLOCKING_SEND = frozenset({"virtual"})
 @dataclass(frozen=True, slots=True)
 class _LoopReader:
     """A descriptor the loop watches for a bus: ``clear()`` before reading (a signal pipe's bytes),
-    ``close()`` when the link closes."""
+    ``take()`` for the next frame waiting (None: none; ``bus.recv(0)`` unless the bus's own queue can
+    be read directly), ``close()`` when the link closes."""
 
     fd: int
     clear: Callable[[], None] = lambda: None
     close: Callable[[], None] = lambda: None
+    take: Callable[[], can.Message | None] | None = None
 
 
 #: frames the loop takes per wake-up before it lets other callbacks run (then it comes back at once)
@@ -68,17 +71,34 @@ def _own_fileno(bus: can.BusABC) -> _LoopReader | None:
 
 
 class _SignalledQueue(queue.Queue[Any]):
-    """A virtual bus's receive queue that also writes one byte to a pipe per frame put in it (from the
-    sending thread), so the loop can watch the pipe as it watches a socket."""
+    """A virtual bus's receive queue that also writes a byte to a pipe (from the sending thread) when a
+    frame arrives and none is signalled yet, so the loop can watch the pipe as it watches a socket: a
+    command's reply frames put back to back cost one write and one wake-up, not one each. The loop
+    empties the pipe, then calls :meth:`rearm`, then reads the queue: a frame put after that signals again."""
 
     def __init__(self, wfd: int) -> None:
         super().__init__()
         self._wfd = wfd
+        self._signalled = False
 
     def put(self, item: Any, block: bool = True, timeout: float | None = None) -> None:
         super().put(item, block, timeout)
-        with contextlib.suppress(BlockingIOError, OSError):  # full: the loop is already due to read
-            os.write(self._wfd, b"\0")
+        if not self._signalled:
+            self._signalled = True
+            try:  # noqa: SIM105 (per frame: contextlib.suppress builds an object per call)
+                os.write(self._wfd, b"\0")
+            except OSError:  # (a full pipe: the loop is due to read anyway; a closed one: no link)
+                pass
+
+    def rearm(self) -> None:
+        self._signalled = False
+
+    def take(self) -> can.Message | None:
+        try:
+            msg: can.Message = self.get_nowait()
+        except queue.Empty:
+            return None
+        return msg
 
 
 def _virtual_fileno(bus: can.BusABC) -> _LoopReader | None:
@@ -111,15 +131,76 @@ def _virtual_fileno(bus: can.BusABC) -> _LoopReader | None:
             break
 
     def clear() -> None:
+        # the pipe emptied first, then re-armed: a frame put after the re-arm writes a byte that stays
+        # in the pipe (the loop comes back); one put before it is in the queue the loop reads next
         with contextlib.suppress(BlockingIOError, OSError):
             os.read(rfd, 4096)
+        new.rearm()
 
     def close() -> None:
         for fd in (rfd, wfd):
             with contextlib.suppress(OSError):
                 os.close(fd)
 
-    return _LoopReader(rfd, clear, close)
+    # python-can's recv() adds nothing here but its software filters: read the queue itself without them
+    return _LoopReader(rfd, clear, close, take=new.take if bus.filters is None else None)
+
+
+def virtual_sender(bus: can.BusABC) -> Callable[[can.Message], None] | None:
+    """A send for python-can's ``virtual`` bus that hands the frame itself to the receiver instead of a
+    deep copy: what ``VirtualBus.send(msg, timeout=0)`` does (the same queues, timestamps, ``channel``,
+    ``is_rx``, the same ``CanOperationError`` for a full or closed bus), without its ``deepcopy`` per
+    receiver, which costs more than the rest of a frame's trip. The returned function *consumes* the
+    message: the caller built it for this send and never touches it again (a second receiver, if any,
+    gets a plain copy). None when ``bus`` is not a virtual bus laid out as python-can 4 lays it out
+    (then ``bus.send`` it is)."""
+    from can.interfaces import virtual
+
+    if not isinstance(bus, virtual.VirtualBus):
+        return None
+    attrs = ("channel", "queue", "channel_id", "receive_own_messages", "preserve_timestamps", "_open")
+    if not all(hasattr(bus, a) for a in attrs) or not isinstance(bus.channel, list):
+        return None
+    vbus: Any = bus  # python-can's VirtualBus attributes, checked above
+    channel: list[queue.Queue[can.Message]] = vbus.channel
+    channel_id = vbus.channel_id
+    own_too = bool(vbus.receive_own_messages)
+    keep_time = bool(vbus.preserve_timestamps)
+    clock = time.time
+
+    def send(msg: can.Message) -> None:
+        if not vbus._open:
+            raise can.CanOperationError("Cannot operate on a closed bus")
+        stamp = msg.timestamp if keep_time else clock()
+        own = vbus.queue
+        targets = [q for q in channel if q is not own or own_too]
+        full = False
+        for i, target in enumerate(targets):
+            copy = msg if i == len(targets) - 1 else _copied(msg)  # the last one gets the original
+            copy.timestamp, copy.channel, copy.is_rx = stamp, channel_id, target is not own
+            try:
+                target.put(copy, block=True, timeout=0)
+            except queue.Full:
+                full = True
+        if full:
+            raise can.CanOperationError("Could not send message to one or more recipients")
+
+    return send
+
+
+def _copied(msg: can.Message) -> can.Message:
+    return can.Message(
+        timestamp=msg.timestamp,
+        arbitration_id=msg.arbitration_id,
+        is_extended_id=msg.is_extended_id,
+        is_remote_frame=msg.is_remote_frame,
+        is_error_frame=msg.is_error_frame,
+        dlc=msg.dlc,
+        data=bytes(msg.data),
+        is_fd=msg.is_fd,
+        bitrate_switch=msg.bitrate_switch,
+        error_state_indicator=msg.error_state_indicator,
+    )
 
 
 #: Interfaces the loop reads itself (``add_reader`` on a descriptor, then ``bus.recv(0)`` until empty),
@@ -180,6 +261,7 @@ class CanLink:
         self._sender: threading.Thread | None = None
         self._direct = interface in NONBLOCKING_SEND  # sent by the caller's thread (see NONBLOCKING_SEND)
         self._send_lock = threading.Lock()  # a direct send: one command's frames together, in order
+        self._put: Callable[[can.Message], None] | None = None  # a direct send (virtual_sender) or None
         self._up = False
         self.frames_in = 0  # CAN frames on rx_id
         self.frames_out = 0
@@ -204,8 +286,10 @@ class CanLink:
     def _observe(self, direction: str, arb_id: int, data: bytes | bytearray) -> None:
         observer = self.observer
         if observer is not None:
-            with contextlib.suppress(Exception):  # a tap must never take the link down
+            try:  # noqa: SIM105 (per frame: contextlib.suppress builds an object per call)
                 observer(direction, arb_id, bytes(data))
+            except Exception:  # a tap must never take the link down
+                pass
 
     async def open(self) -> None:
         """Open the bus (in a worker thread: some interfaces block while they open)."""
@@ -227,7 +311,11 @@ class CanLink:
         else:
             self._notifier = can.Notifier(bus, [_Listener(self)], timeout=0.05)
         self._sendq = queue.SimpleQueue()
-        if not self._direct:
+        self._put = None
+        if self._direct:
+            put = virtual_sender(bus) if self.interface == "virtual" else None
+            self._put = put or (lambda msg: bus.send(msg, timeout=0))
+        else:
             self._sender = threading.Thread(target=self._send_loop, args=(bus, self._sendq), daemon=True)
             self._sender.start()
         self._up = True
@@ -282,14 +370,14 @@ class CanLink:
 
     def _send_now(self, frames: list[tuple[int, bytes]], on_sent: Callable[[], None] | None) -> None:
         """Put the frames on a bus whose send cannot block, from the calling thread (any thread)."""
-        bus = self._bus
+        put = self._put
         with self._send_lock:
             for arb_id, data in frames:
                 msg = can.Message(arbitration_id=arb_id, data=data, is_extended_id=False)
                 try:
-                    if bus is None:
+                    if put is None or self._bus is None:
                         raise can.CanOperationError("bus closed")
-                    bus.send(msg, timeout=0)
+                    put(msg)
                 except (can.CanError, OSError, ValueError) as exc:
                     if self._up:  # (a link closed under a sender is not a send error)
                         self.send_errors += 1
@@ -321,9 +409,10 @@ class CanLink:
         if reader is None or self._reader_due:
             return
         reader.clear()  # first: a frame put after this signals again
+        take = reader.take or (lambda: bus.recv(0))
         try:
             for _ in range(READ_BATCH):
-                if self._reader is not reader or (msg := bus.recv(0)) is None:
+                if self._reader is not reader or (msg := take()) is None:
                     return
                 if self._accept(msg):
                     self.on_frame(msg.arbitration_id, bytes(msg.data))

@@ -429,6 +429,10 @@ class GimbalCanSim:
         self.node = node or GimbalNode()
         self._bus = can.Bus(interface=interface, channel=channel, receive_own_messages=False, **bus_kwargs)
         self._can = can
+        from adapters.rsdk.link import virtual_sender
+
+        # a real device's frames cost it nothing to put on the wire: on the in-process bus, no deep copy
+        self._put = (virtual_sender(self._bus) if interface == "virtual" else None) or self._bus.send
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="gimbal-sim", daemon=True)
         self.paused = False
@@ -455,7 +459,10 @@ class GimbalCanSim:
 
     def _send(self, frames: list[tuple[int, bytes]]) -> None:
         for arb_id, data in frames:
-            self._bus.send(self._can.Message(arbitration_id=arb_id, data=data, is_extended_id=False))
+            self._put(self._can.Message(arbitration_id=arb_id, data=data, is_extended_id=False))
+
+    #: frames taken in one go before the model's clock ticks (a command's frames arrive back to back)
+    BATCH = 64
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -463,12 +470,16 @@ class GimbalCanSim:
             now = time.monotonic()
             if self.paused:
                 continue
-            if msg is not None and not msg.is_extended_id and not msg.is_error_frame:
-                replies = self.node.on_can(msg.arbitration_id, bytes(msg.data), now)
-                if replies and self.error_frames:  # a bit error / stuff error flagged by a controller
-                    self._bus.send(self._can.Message(arbitration_id=0x088, is_error_frame=True, dlc=8,
-                                                     data=bytes(8)))  # fmt: skip
-                self._send(replies)
+            for taken in range(1, self.BATCH + 1):  # the frames waiting, each answered as it completes
+                if msg is None:
+                    break
+                if not msg.is_extended_id and not msg.is_error_frame:
+                    replies = self.node.on_can(msg.arbitration_id, bytes(msg.data), now)
+                    if replies and self.error_frames:  # a bit error / stuff error flagged by a controller
+                        self._bus.send(self._can.Message(arbitration_id=0x088, is_error_frame=True, dlc=8,
+                                                         data=bytes(8)))  # fmt: skip
+                    self._send(replies)
+                msg = self._bus.recv(0) if taken < self.BATCH else None  # (the rest: next turn)
             self._send(self.node.tick(now))
 
 
