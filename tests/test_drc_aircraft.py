@@ -50,7 +50,7 @@ def rig(private_broker: LocalBroker) -> Iterator[dict[str, Any]]:
         cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1, timeout=10)
         assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
         adapter = gw.app.devices.by_sn(SN)
-        asyncio.run_coroutine_threadsafe(adapter._flight_task("takeoff"), gw.loop).result(5)  # take off
+        asyncio.run_coroutine_threadsafe(adapter.flight_task("takeoff"), gw.loop).result(5)  # take off
         wait_until(lambda: fc.inspect(lambda m: m.in_air and m.display_mode == 6), 10, what="airborne")
         link = {"address": f"127.0.0.1:{drc_broker.port}", "client_id": "drc-gw", "username": DRC_USER,
                 "password": DRC_PASSWORD, "expire_time": int(time.time()) + 600,

@@ -19,12 +19,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from adapters.errors import UnknownCommandError
+from adapters.errors import LayoutError, UnknownCommandError
 from adapters.osdk import commands as cmds
 from adapters.osdk import subscription as sub
 from adapters.osdk.protocol import encode_command
 from adapters.osdk.sim import NOT_ACTIVATED_ACK, SUBSCRIBE_REFUSED_ACK, OsdkFcModel
-from adapters.wire.layout import LayoutError
 from tests.test_osdk_sim import APP_ID, TAKEOFF, FakeHost
 
 # sizeof(TypeMap<TOPIC_...>::type), OSDK 3.9.0 headers, packed (g++ on x86-64).

@@ -11,6 +11,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from adapters.errors import LayoutError
 from adapters.osdk.commands import decode_request
 from adapters.osdk.protocol import decode_frame, encode_command
 from adapters.osdk.telemetry import (
@@ -22,7 +23,7 @@ from adapters.osdk.telemetry import (
     decode_flight_data,
     encode_flight_data,
 )
-from adapters.wire.layout import Field, Layout, LayoutError
+from adapters.wire.layout import Field, Layout
 
 NEW_SIZES = [15, 16, 12, 13, 12, 50, 68, 44, 6, 12, 13, 4, 13, 2]
 M100_SIZES = [9, 16, 12, 13, 12, 25, 6, 12, 13, 1, 1, 2]

@@ -89,9 +89,9 @@ def test_no_progress_event_is_lost_across_a_broker_outage() -> None:
     try:
         wait_until(lambda: gw.app.devices.by_sn("OSDK-OUT-1").online, 10, what="aircraft online")
         adapter = gw.app.devices.by_sn("OSDK-OUT-1")
-        asyncio.run_coroutine_threadsafe(adapter._obtain(1), gw.loop).result(5)
+        asyncio.run_coroutine_threadsafe(adapter.obtain_control(1), gw.loop).result(5)
         gw.app.devices.authority.flight.add("OSDK-OUT-1")
-        asyncio.run_coroutine_threadsafe(adapter._flight_task("takeoff"), gw.loop).result(5)
+        asyncio.run_coroutine_threadsafe(adapter.flight_task("takeoff"), gw.loop).result(5)
         wait_until(lambda: fc.inspect(lambda m: m.in_air and m.display_mode == 6), 10, what="airborne")
         home = (adapter.telemetry.latitude, adapter.telemetry.longitude)
         alt = adapter.telemetry.home_altitude

@@ -8,8 +8,9 @@ from dataclasses import dataclass
 from hypothesis import given
 from hypothesis import strategies as st
 
+from adapters.errors import LayoutError
 from adapters.wire.crc import crc8_rm
-from adapters.wire.layout import Field, Layout, LayoutError, Tail
+from adapters.wire.layout import Field, Layout, Tail
 from adapters.wire.stream import BadFrame, StreamDecoder
 
 

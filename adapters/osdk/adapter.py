@@ -609,7 +609,7 @@ class AircraftAdapter(SupervisedAdapter):
         if not self._online:
             raise DeviceNotConnected(f"aircraft {self.info.sn} is not connected")
 
-    async def _gs(self, name: str, fields: Mapping[str, Any] | None = None) -> cmds.Message:
+    async def ground_station(self, name: str, fields: Mapping[str, Any] | None = None) -> cmds.Message:
         """A ground-station command whose ACK code 0 is success; others raise with the seed's text."""
         msg = await self.command(name, fields)
         code = int(msg.fields.get("ack", 0))
@@ -618,7 +618,10 @@ class AircraftAdapter(SupervisedAdapter):
             raise DeviceRejected(ground_station_ack(code), f"{name}: {text} (0x{code:02X})", {"ack": code})
         return msg
 
-    async def _obtain(self, control: int) -> None:
+    async def obtain_control(self, control: int) -> None:
+        """Obtain (1) or release (0) control of the flight controller, asking again while the FC says it
+        is still switching; refused by the FC: :class:`DeviceRejected` (RC in charge: 319030, no flight
+        authority)."""
         for _ in range(OBTAIN_RETRIES):
             msg = await self.command("obtain_control", {"control": control})
             code = int(msg.fields["ack"])
@@ -635,10 +638,10 @@ class AircraftAdapter(SupervisedAdapter):
 
     async def _grab(self, data: FlightAuthorityGrab) -> CallResult:
         self._require_online()
-        await self._obtain(1)
+        await self.obtain_control(1)
         return CallResult()
 
-    async def _flight_task(self, task: str) -> None:
+    async def flight_task(self, task: str) -> None:
         """``task``: takeoff, landing or go_home, in this firmware's codes (cmds.FIRMWARE_CODES)."""
         fields = self._task_fields(task)
         msg = await self.command("flight_task", fields)
@@ -672,7 +675,7 @@ class AircraftAdapter(SupervisedAdapter):
             "action_on_rc_lost": 0 if exit_on_rc_lost else 1,
             "gimbal_pitch_mode": 0,
         }
-        await self._gs("wp_init", init)
+        await self.ground_station("wp_init", init)
         for index, (lat, lon, alt) in enumerate(points):
             wp = {
                 "index": index,
@@ -681,7 +684,7 @@ class AircraftAdapter(SupervisedAdapter):
                 "altitude": alt,
                 "action_time_limit": 100,
             }
-            ack = await self._gs("wp_upload", wp)
+            ack = await self.ground_station("wp_upload", wp)
             if int(ack.fields.get("index", index)) != index:
                 raise DeviceRejected(
                     ResultCode.BUSY, f"waypoint {index} acknowledged as {ack.fields.get('index')}"
@@ -765,13 +768,13 @@ class AircraftAdapter(SupervisedAdapter):
             {"latitude": p.latitude, "longitude": p.longitude, "height": p.height} for p in data.points
         ]
         self.mission = task
-        await self._gs("wp_start_stop", {"start": 0})
+        await self.ground_station("wp_start_stop", {"start": 0})
         self._start_watch(task)
         return CallResult()
 
     async def _fly_to_point_stop(self, data: FlyToPointStop) -> CallResult:
         self._require_online()
-        await self._gs("wp_start_stop", {"start": 1})
+        await self.ground_station("wp_start_stop", {"start": 1})
         task = self.mission
         if task is not None and not task.finished:
             task.finished = True  # no wayline_ok for a cancelled task
@@ -888,7 +891,7 @@ class AircraftAdapter(SupervisedAdapter):
         self._check_takeoff(data)
         if self.fw == "new":
             await self._set_go_home_altitude(int(data.rth_altitude))
-        await self._flight_task("takeoff")
+        await self.flight_task("takeoff")
         task = Task("takeoff", data.flight_id, 2)
         self.mission = task
         self._progress(task, "task_ready", 0)
@@ -912,7 +915,7 @@ class AircraftAdapter(SupervisedAdapter):
             # exit_wayline_when_rc_lost / commander_mode_lost_action: 1 exit → init action_on_rc_lost 0;
             # 0 or absent → 1 continue (the seed's default)
             await self._upload(points, data.max_speed, exit_on_rc_lost=self._exit_on_rc_lost(data))
-            await self._gs("wp_start_stop", {"start": 0})
+            await self.ground_station("wp_start_stop", {"start": 0})
         except DeviceRejected as exc:
             self._progress(task, "wayline_failed", 0, exc.result)
             return
@@ -961,26 +964,26 @@ class AircraftAdapter(SupervisedAdapter):
         }
 
     async def _ext_pause(self, name: str, data: Pause) -> CallResult:
-        await self._gs(name, {"pause": 0 if data.pause else 1})
+        await self.ground_station(name, {"pause": 0 if data.pause else 1})
         return CallResult()
 
     async def _ext_plain(self, name: str, fields: Mapping[str, Any] | None = None) -> CallResult:
-        await self._gs(name, fields or {"arbitrary": 0})
+        await self.ground_station(name, fields or {"arbitrary": 0})
         return CallResult()
 
     async def _ext_idle_set(self, data: IdleVelocity) -> CallResult:
-        msg = await self._gs("wp_set_idle_velocity", {"idle_velocity": data.velocity})
+        msg = await self.ground_station("wp_set_idle_velocity", {"idle_velocity": data.velocity})
         return CallResult(0, {"idle_velocity": float(msg.fields["idle_velocity"])})
 
     async def _ext_idle_get(self, data: EmptyRequest) -> CallResult:
-        msg = await self._gs("wp_get_idle_velocity", {"arbitrary": 0})
+        msg = await self.ground_station("wp_get_idle_velocity", {"arbitrary": 0})
         return CallResult(0, {"idle_velocity": float(msg.fields["idle_velocity"])})
 
     async def _ext_download(self, data: EmptyRequest) -> CallResult:
-        init = await self._gs("wp_download_init", {"arbitrary": 0})
+        init = await self.ground_station("wp_download_init", {"arbitrary": 0})
         points = []
         for index in range(int(init.fields["length"])):
-            wp = await self._gs("wp_download_point", {"index": index})
+            wp = await self.ground_station("wp_download_point", {"index": index})
             f = wp.fields
             points.append(
                 {
@@ -1010,11 +1013,11 @@ class AircraftAdapter(SupervisedAdapter):
             "start_point_position": data.start_point,
             "yaw_mode": data.yaw_mode,
         }
-        msg = await self._gs("hp_upload_start", fields)
+        msg = await self.ground_station("hp_upload_start", fields)
         return CallResult(0, {"max_radius": float(msg.fields.get("max_radius", 0.0))})
 
     async def _ext_hotpoint_download(self, data: EmptyRequest) -> CallResult:
-        f = (await self._gs("hp_download", {"arbitrary": 0})).fields
+        f = (await self.ground_station("hp_download", {"arbitrary": 0})).fields
         out = {
             "latitude": math.degrees(f["hp_latitude"]),
             "longitude": math.degrees(f["hp_longitude"]),
@@ -1033,7 +1036,7 @@ class AircraftAdapter(SupervisedAdapter):
             "init_longitude": math.radians(data.longitude),
             "init_alti": data.altitude,
         }
-        await self._gs("fm_upload_start", fields)
+        await self.ground_station("fm_upload_start", fields)
         return CallResult()
 
     async def _ext_followme_target(self, data: FollowMeTarget) -> CallResult:
@@ -1043,11 +1046,11 @@ class AircraftAdapter(SupervisedAdapter):
         return CallResult()
 
     async def _ext_task(self, task: str) -> CallResult:
-        await self._flight_task(task)
+        await self.flight_task(task)
         return CallResult()
 
     async def _ext_release(self, data: EmptyRequest) -> CallResult:
-        await self._obtain(0)
+        await self.obtain_control(0)
         if self._sink is not None:
             self._sink.authority_lost(self.info.sn)
         return CallResult()

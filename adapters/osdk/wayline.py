@@ -3,8 +3,9 @@ upload and start each chained ground-station mission, follow its reached / finis
 change the cruise speed per segment, pause / resume / cancel, and the gateway's own return home.
 
 Owns the I/O half of a wayline on this family (the plan, sans-I/O, is ``wayline_plan.py``); uses the
-adapter's command path (``_gs``, ``_flight_task``) and its mission pushes (``Task``). Knows nothing of
-MQTT, downloads or Cloud API task states: it reports through the callbacks it is given.
+adapter's public command path (``ground_station``, ``obtain_control``, ``flight_task``) and its mission
+pushes (``Task``). Knows nothing of MQTT, downloads or Cloud API task states: it reports through the
+callbacks it is given.
 """
 
 from __future__ import annotations
@@ -83,14 +84,14 @@ class OsdkWayline:
         """SDK control of the FC (``01 00`` obtain), as ``flight_authority_grab`` takes it, when not held:
         the FC refuses take-off and missions without it."""
         if not self.adapter.has_control:
-            await self.adapter._obtain(1)
+            await self.adapter.obtain_control(1)
 
     async def take_off(self, timeout: float) -> None:
         """On the ground: the FC's take-off, then wait until airborne and the take-off has ended."""
         a = self.adapter
         if a.in_air:
             return
-        await a._flight_task("takeoff")
+        await a.flight_task("takeoff")
         deadline = a._now() + timeout
         while not self._took_off():
             if a._now() > deadline:
@@ -135,7 +136,7 @@ class OsdkWayline:
                     change.add_done_callback(self._speed_changes.discard)
 
             task.on_reached = reached
-            await self.adapter._gs("wp_start_stop", {"start": 0})
+            await self.adapter.ground_station("wp_start_stop", {"start": 0})
             if k == 0:
                 on_entered()
             while not (task.finished or task.failed is not None):
@@ -151,26 +152,26 @@ class OsdkWayline:
 
     async def _set_speed(self, speed: float) -> None:
         try:
-            await self.adapter._gs("wp_set_idle_velocity", {"idle_velocity": speed})
+            await self.adapter.ground_station("wp_set_idle_velocity", {"idle_velocity": speed})
         except Exception as exc:  # a missed speed change is logged; the mission goes on
             log.warning("aircraft %s: segment speed %.1f m/s not set: %s", self.adapter.info.sn, speed, exc)
 
     async def _upload(self, mission: FcMission) -> None:
         a = self.adapter
-        await a._gs("wp_init", mission.init)
+        await a.ground_station("wp_init", mission.init)
         for wp in mission.waypoints:
-            ack = await a._gs("wp_upload", wp)
+            ack = await a.ground_station("wp_upload", wp)
             if int(ack.fields.get("index", wp["index"])) != wp["index"]:
                 raise DeviceRejected(
                     ResultCode.BUSY, f"waypoint {wp['index']} acknowledged as {ack.fields.get('index')}"
                 )
 
     async def pause(self) -> None:
-        await self.adapter._gs("wp_pause_resume", {"pause": 0})
+        await self.adapter.ground_station("wp_pause_resume", {"pause": 0})
         self.paused = True
 
     async def resume(self) -> None:
-        await self.adapter._gs("wp_pause_resume", {"pause": 1})
+        await self.adapter.ground_station("wp_pause_resume", {"pause": 1})
         self.paused = False
 
     async def cancel(self) -> None:
@@ -178,7 +179,7 @@ class OsdkWayline:
         task = self._task
         if task is not None and not task.finished:
             task.finished = True
-        await self.adapter._gs("wp_start_stop", {"start": 1})
+        await self.adapter.ground_station("wp_start_stop", {"start": 1})
 
     def return_home_plan(self, rth_altitude: float) -> list[tuple[float, float, float]]:
         """The way home the gateway flies: up to ``rth_altitude`` over the aircraft, over home at that
@@ -205,15 +206,15 @@ class OsdkWayline:
             "action_on_rc_lost": 0,
             "gimbal_pitch_mode": 0,
         }
-        await a._gs("wp_init", init)
+        await a.ground_station("wp_init", init)
         for i, (lat, lon, alt) in enumerate(path):
             wp = {"index": i, "latitude": math.radians(lat), "longitude": math.radians(lon), "altitude": alt,
                   "action_time_limit": 100}  # fmt: skip
-            await a._gs("wp_upload", wp)
+            await a.ground_station("wp_upload", wp)
         task = Task("wayline", flight_id, len(path))
         self._task = task
         a.mission = task
-        await a._gs("wp_start_stop", {"start": 0})
+        await a.ground_station("wp_start_stop", {"start": 0})
 
     @property
     def mission_running(self) -> bool:
