@@ -355,8 +355,12 @@ def test_return_home_ends_the_task_and_lands_at_home(rig: dict[str, Any]) -> Non
     )
     assert cloud.service("return_home", None)["data"]["result"] == 0
     wait_until(lambda: _status(cloud, flight)[-1:] == ["canceled"], 5, what="task canceled")
-    bp = _progress(cloud, flight)[-1]["data"]["output"]["ext"]["break_point"]
-    assert bp["break_reason"] == 1283 and bp["index"] >= 2
+    ext = _progress(cloud, flight)[-1]["data"]["output"]["ext"]
+    bp = ext["break_point"]
+    assert bp["break_reason"] == 1283
+    # DJI's numbering: on the segment that starts at the last waypoint reached, with the fraction flown
+    done = ext["current_waypoint_index"]
+    assert done >= 2 and bp["index"] == done - 1 and bp["state"] == 0 and 0.0 <= bp["progress"] <= 1.0
     info = cloud.wait_for("/events", lambda b: b.get("method") == "return_home_info")[-1]["data"]
     assert info["flight_id"] == flight and len(info["planned_path_points"]) == 2
     home = info["planned_path_points"][-1]

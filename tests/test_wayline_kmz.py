@@ -19,7 +19,7 @@ from adapters.osdk import commands as cmds
 from adapters.osdk.wayline_plan import MISSION_MAX, PlanOptions, plan_route
 from adapters.wayline.kmz import Limits, load_route, parse_wpml, unpack_wpml
 from adapters.wayline.writer import ActionSpec, PointSpec, kmz_bytes, md5_hex, waylines_wpml
-from gateway.wayline.task import Phase, TaskBook
+from gateway.wayline.task import ON_SEGMENT, ON_WAYPOINT, Phase, TaskBook, break_point_at
 from tests.test_sans_io import ROOT, _imports
 
 HOME = (22.5431, 113.958)
@@ -312,6 +312,43 @@ def test_break_point_resumes_from_its_waypoint_at_rth_altitude() -> None:
     (m,) = plan.missions
     assert m.points[0] is None and m.waypoints[0]["altitude"] == 60.0
     assert m.points[1:] == [(0, 3), (0, 4)] and plan.route_points == 2
+
+
+def test_a_break_point_names_the_segment_by_the_waypoint_it_starts_from() -> None:
+    """DJI's numbering (MSDK 5 ``BreakPointInfo``: 25 % of the way from waypoint 1 to waypoint 2 is
+    waypoint 1, progress 0.25): after waypoint k the aircraft is on segment k, with the fraction flown."""
+    pts = [(22.0, 113.0), (22.0, 113.001), (22.001, 113.001), (22.001, 113.002)]
+    assert break_point_at(0, pts, (21.9999, 113.0)) == (0, ON_WAYPOINT, 0.0)  # before the first
+    index, state, progress = break_point_at(2, pts, (22.00025, 113.001))  # a quarter of 1 -> 2
+    assert (index, state) == (1, ON_SEGMENT) and progress == pytest.approx(0.25, abs=1e-6)
+    assert break_point_at(2, pts, (21.999, 113.001))[2] == 0.0  # behind its start: clamped
+    assert break_point_at(2, pts, (22.003, 113.001))[2] == 1.0
+    lat = 22.0005  # half way east along segment 2 -> 3, where a degree of longitude is cos(22°) shorter
+    assert break_point_at(3, pts, (22.001, 113.0015))[2] == pytest.approx(0.5, abs=1e-6)
+    assert break_point_at(3, pts, (lat, 113.0015))[:2] == (2, ON_SEGMENT)
+    assert break_point_at(4, pts, (22.001, 113.002)) == (3, ON_WAYPOINT, 0.0)  # after the last
+    assert break_point_at(2, None, (22.0, 113.0)) == (1, ON_SEGMENT, 0.0)  # the route unknown
+    assert break_point_at(0, pts, (22.0, 113.0), start=2) == (2, ON_WAYPOINT, 0.0)  # a resumed run
+
+
+@given(st.integers(min_value=2, max_value=12), st.data())
+@settings(max_examples=40, deadline=None)
+def test_resuming_from_a_break_point_flies_on_from_the_next_waypoint(n: int, data: st.DataObject) -> None:
+    """Break point out, prepare in: the resumed route starts with the waypoint the aircraft was flying
+    to, never skipping it and never flying again the one it had reached (its actions: a second photo)."""
+    route = _route(_points(n))
+    pts = [(pm.latitude, pm.longitude) for pm in route.waylines[0].placemarks]
+    done = data.draw(st.integers(min_value=0, max_value=n - 1))  # waypoints 0 .. done - 1 reached
+    f = data.draw(st.floats(min_value=0.0, max_value=1.0))
+    if done == 0:
+        where = pts[0]
+    else:
+        (a_lat, a_lon), (b_lat, b_lon) = pts[done - 1], pts[done]
+        where = (a_lat + f * (b_lat - a_lat), a_lon + f * (b_lon - a_lon))
+    index, state, _ = break_point_at(done, pts, where)
+    plan = plan_route(route, _options(break_point=(0, index, state), rth_altitude=60))
+    flown = [p for m in plan.missions for p in m.points if p is not None]
+    assert flown[0] == (0, done) and flown[-1] == (0, n - 1)
 
 
 # ------------------------------------------------------------------------------------- the task book

@@ -62,6 +62,8 @@ from gateway.devices import DeviceTable
 from gateway.metrics import Metrics
 from gateway.wayline.fetch import FetchError, fetch_kmz
 from gateway.wayline.task import (
+    NO_WAYLINE,
+    ON_WAYPOINT,
     STEP_DOWNLOAD,
     STEP_TAKEOFF,
     STEP_TRIGGER,
@@ -71,6 +73,7 @@ from gateway.wayline.task import (
     TaskBook,
     Verdict,
     WaylineTask,
+    break_point_at,
 )
 from schemas import TopicKind
 from schemas.base import InboundModel
@@ -450,17 +453,38 @@ class WaylineService:
         if t.latitude is None or t.longitude is None:
             return None
         yaw = t.attitude[2] if t.attitude is not None else 0.0
+        wayline_id = 0 if task.wayline_id == NO_WAYLINE else task.wayline_id
+        start = 0
+        resumed = getattr(task.request, "break_point", None)  # this run resumed an earlier one's
+        not_yet = task.waypoint_index == 0
+        if resumed is not None and not_yet and task.wayline_id in (NO_WAYLINE, resumed.wayline_id):
+            wayline_id = resumed.wayline_id
+            start = resumed.index if int(resumed.state) == ON_WAYPOINT else resumed.index + 1
+        index, state, progress = break_point_at(
+            task.waypoint_index, self._waypoints(task.flight_id, wayline_id), (t.latitude, t.longitude), start
+        )
         return {
-            "index": task.waypoint_index,
-            "state": 0,
-            "progress": 0.0,
-            "wayline_id": 0 if task.wayline_id == 65535 else task.wayline_id,
+            "index": index,
+            "state": state,
+            "progress": round(progress, 4),
+            "wayline_id": wayline_id,
             "break_reason": reason,
             "latitude": max(-90.0, min(90.0, t.latitude)),
             "longitude": max(-180.0, min(180.0, t.longitude)),
             "height": float(t.altitude or 0.0),
             "attitude_head": max(-180.0, min(180.0, yaw)),
         }
+
+    def _waypoints(self, flight_id: str, wayline_id: int) -> list[tuple[float, float]] | None:
+        """The latitude and longitude of the flown wayline's waypoints, in index order (None: unknown)."""
+        flown = self.route_of(flight_id)
+        if flown is None:
+            return None
+        for wayline in flown[1].waylines:
+            if wayline.wayline_id == wayline_id:
+                ordered = sorted(wayline.placemarks, key=lambda pm: pm.index)
+                return [(pm.latitude, pm.longitude) for pm in ordered]
+        return None
 
     # -- reports ---------------------------------------------------------------------------------
     def _emit(self, task: WaylineTask) -> None:

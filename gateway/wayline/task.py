@@ -34,11 +34,21 @@ aircraft, 20 take-off, 24 trigger the wayline, 25 executing (the step between Do
 preparation and 10 + 90 × waypoints done / waypoints, 100 on ``ok``. ``current_waypoint_index`` counts
 the waypoints of the current wayline done (0 before the first). ``wayline_id`` is 65535 until the aircraft
 enters a wayline (observed on real docks, §8.7).
+
+The break point of a task that ends early (:func:`break_point_at`) follows DJI's numbering, where a
+*segment* is named by the waypoint it starts from (DJI MSDK 5 ``BreakPointInfo``: 25 % of the way from
+waypoint 1 to waypoint 2 is waypoint 1 with progress 0.25): after waypoint *k* the aircraft is on segment
+*k* (state 0) with the fraction of it flown as ``progress``; before the first waypoint it is at waypoint 0
+(state 1: nothing of the route flown); after the last, at the last (state 1). A resume from it
+(``flighttask_prepare`` with ``break_point``) flies on from waypoint *k* + 1, or from the waypoint of a
+state 1 break point.
 """
 
 from __future__ import annotations
 
 import enum
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -272,3 +282,35 @@ class TaskBook:
                 "status": task.status,
             },
         }
+
+
+#: state of a break point: on a segment (named by the waypoint it starts from) or on a waypoint
+ON_SEGMENT, ON_WAYPOINT = 0, 1
+
+
+def break_point_at(
+    done: int,
+    waypoints: Sequence[tuple[float, float]] | None,
+    position: tuple[float, float],
+    start: int = 0,
+) -> tuple[int, int, float]:
+    """``(index, state, progress)`` of the aircraft at ``position`` (latitude, longitude) when waypoints
+    up to index ``done`` - 1 of the current wayline (``waypoints``, their latitude and longitude in index
+    order, None if unknown) have been reached; ``start`` is the first waypoint the run flies (a resumed
+    task's). ``progress`` is the aircraft's position projected on the segment, 0..1 (0 when the route is
+    unknown: a resume then flies the whole segment again)."""
+    if done <= start:
+        return start, ON_WAYPOINT, 0.0
+    if waypoints is not None and done >= len(waypoints):
+        return len(waypoints) - 1, ON_WAYPOINT, 0.0
+    index = done - 1
+    if waypoints is None:
+        return index, ON_SEGMENT, 0.0
+    (lat0, lon0), (lat1, lon1) = waypoints[index], waypoints[index + 1]
+    east = math.cos(math.radians(lat0))  # a local flat map: metres per degree of longitude shrink
+    sx, sy = (lon1 - lon0) * east, lat1 - lat0
+    px, py = (position[1] - lon0) * east, position[0] - lat0
+    length2 = sx * sx + sy * sy
+    if length2 <= 0.0:
+        return index, ON_SEGMENT, 0.0
+    return index, ON_SEGMENT, min(1.0, max(0.0, (px * sx + py * sy) / length2))

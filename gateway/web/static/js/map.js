@@ -261,7 +261,9 @@ export function render(state) {
   const w = state.wayline;
   if (w && (!m || live(w))) {
     const of = w.total ? ` · waypoint ${w.reached}/${w.total}` : "";
-    const bp = w.break_point ? ` · break point after waypoint ${w.break_point.index}` : "";
+    const b = w.break_point;  // DJI's numbering: state 0 = on the segment that starts at waypoint index
+    const bp = !b ? "" : b.state === 1 ? ` · break point at waypoint ${b.index}`
+      : ` · break point after waypoint ${b.index} (${Math.round(b.progress * 100)} % of the way to the next)`;
     el.textContent = `wayline ${w.flight_id}: ${w.status} ${w.percent}%${of}${w.result ? ` · result ${w.result}` : ""}${bp}`;
     el.dataset.waylineStatus = w.status;
     el.dataset.waylinePercent = String(w.percent);
