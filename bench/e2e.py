@@ -15,7 +15,7 @@ the CAN round trip is ≤ 0.5 ms at p50 and ≤ 1.5 ms at p99. The two are inter
 gateway-only, in a rotating order), so both see the same machine.
 
 The gateway is measured twice: in this process (a thread, as the tests run it) and in a process of its
-own with its simulated gimbal inside it (``python -m bench.e2e CONFIG``, as ``dji-gateway run`` runs it
+own with its simulated gimbal inside it (``python -m bench.e2e SETTINGS_JSON``, as ``dji-gateway run`` runs it
 on an edge computer). In this process the bench's own cloud client and echo threads share the
 gateway's interpreter lock, which the gateway never does when deployed; both sets of rows are held
 to the same targets.
@@ -182,24 +182,14 @@ def in_this_process(broker: LocalBroker, n: int, warmup: int) -> dict[str, list[
         sim.stop()
 
 
-def _toml(doc: dict[str, Any]) -> str:
-    device = doc["devices"][0]
-    lines = [f'gateway_sn = "{doc["gateway_sn"]}"', "[broker]", f'url = "{doc["broker"]["url"]}"',
-             "[dispatcher]", "require_authority = false", "[[devices]]"]  # fmt: skip
-    lines += [f'{key} = "{value}"' for key, value in device.items()]
-    return "\n".join(lines) + "\n"
-
-
 def in_its_own_process(broker: LocalBroker, n: int, warmup: int) -> dict[str, list[float]]:
-    """The gateway as deployed: a process of its own (``python -m bench.e2e CONFIG``: the gateway and, as
-    ``dji-gateway run --simulate`` does, the simulated gimbal on its virtual bus inside it)."""
+    """The gateway as deployed: a process of its own (``python -m bench.e2e SETTINGS_JSON``: the gateway
+    and, as ``dji-gateway run --simulate`` does, the simulated gimbal on its virtual bus inside it)."""
     channel = f"bench-{uuid.uuid4().hex[:6]}"
     root = Path(__file__).resolve().parent.parent
     with tempfile.TemporaryDirectory() as tmp:
-        config = Path(tmp) / "gateway.toml"
-        config.write_text(_toml(_settings_doc(broker.url, channel)))
         log = (Path(tmp) / "gateway.log").open("w")
-        argv = [sys.executable, "-m", "bench.e2e", str(config)]
+        argv = [sys.executable, "-m", "bench.e2e", json.dumps(_settings_doc(broker.url, channel))]
         env = {**os.environ, "PYTHONPATH": str(root)}
         proc = subprocess.Popen(argv, cwd=root, stdout=log, stderr=subprocess.STDOUT, env=env)
         try:
@@ -243,31 +233,15 @@ def _wait_answering(port: int, proc: subprocess.Popen[bytes], timeout: float = 2
         timer.close()
 
 
-def serve(config: str) -> int:
-    """``python -m bench.e2e CONFIG``: the gateway of ``CONFIG`` with its simulated devices in this process
-    until SIGTERM (what ``dji-gateway run --simulate`` does, without the tour's other devices)."""
+def serve(doc: str) -> int:
+    """``python -m bench.e2e SETTINGS_JSON``: the gateway of those settings with their simulated devices in
+    this process until SIGTERM, as ``dji-gateway run --simulate`` runs it (its own ``serve``), without
+    the tour's other devices."""
     import asyncio
-    import signal
 
-    from gateway.app import GatewayApp
-    from gateway.run_cli import start_simulators
+    from gateway.run_cli import serve as serve_gateway
 
-    sims: list[Any] = []
-    settings = start_simulators(load_settings(config), sims)
-
-    async def main() -> None:
-        app = GatewayApp(settings)
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            loop.add_signal_handler(sig, app.stop)
-        await app.run()
-
-    try:
-        asyncio.run(main())
-    finally:
-        for sim in sims:
-            sim.stop()
-    return 0
+    return asyncio.run(serve_gateway(load_settings(None, **json.loads(doc)), simulate=True))
 
 
 def run(cfg: Config) -> list[Row]:

@@ -144,10 +144,12 @@ def cmd_run(ns: argparse.Namespace) -> int:
         log.warning("%s", warning)
     for line in file_warnings:
         log.warning("%s", line)
-    return asyncio.run(_run(settings, simulate=ns.simulate))
+    return asyncio.run(serve(settings, simulate=ns.simulate))
 
 
-async def _run(settings: GatewaySettings, *, simulate: bool) -> int:
+async def serve(settings: GatewaySettings, *, simulate: bool) -> int:
+    """The service until SIGTERM/SIGINT: ``settings``' gateway, with its entries' simulators started in
+    this process when ``simulate`` (the settings are used as given: no tour devices are added here)."""
     from gateway.app import GatewayApp
 
     sims: list[InProcessSim] = []
