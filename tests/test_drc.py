@@ -157,11 +157,11 @@ def test_enter_sticks_heartbeats_seq_rules_and_exit(
         assert stale["data"]["output"]["seq"] == 3
         assert drc.count("drone_control", lambda d: d["output"].get("seq") == 5) == 1
         wait_until(lambda: model.yaw.speed == 40.0, 3, what="seq 5 applied")
+        last_stick = time.monotonic()  # (before the send: the timeout may fire before the wait below ends)
         drc.send("drone_control", {"seq": 0, "w": -20.0})  # seq 0 restarts the sequence
         wait_until(lambda: model.yaw.speed == -20.0, 3, what="restarted sequence accepted")
 
         # sticks stop: the set-point is zeroed within stick_timeout (0.5 s) plus a stream period
-        last_stick = time.monotonic()
         wait_until(lambda: model.yaw.speed == 0.0, 3, what="zero speed after sticks stop")
         first_zero = next(
             t for t, (n, f) in zip(sniffer.times, sniffer.commands, strict=False)
