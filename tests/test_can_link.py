@@ -17,7 +17,14 @@ import uuid
 import can
 import pytest
 
-from adapters.rsdk.link import LOOP_READ, NONBLOCKING_SEND, CanLink, virtual_sender
+from adapters.rsdk.link import (
+    LOOP_READ,
+    NONBLOCKING_SEND,
+    CanLink,
+    virtual_batch_sender,
+    virtual_reader,
+    virtual_sender,
+)
 
 
 def _link(loop: asyncio.AbstractEventLoop, channel: str, got: list[tuple[int, bytes, int]]) -> CanLink:
@@ -262,3 +269,56 @@ def test_a_frame_put_while_the_loop_empties_the_pipe_still_signals_the_next(
             peer.shutdown()
 
     asyncio.run(main())
+
+
+def test_a_batch_reaches_a_signalled_reader_whole_with_one_signal() -> None:
+    """``virtual_batch_sender`` (one command's frames): a reader of ``virtual_reader`` finds every frame
+    of the batch, in order, behind one byte in its pipe (one wake-up, never half a command); a plain
+    python-can receiver on the same channel gets them too; the sender's timestamps are fresh."""
+    channel = f"vb-{uuid.uuid4().hex[:6]}"
+    sender = can.Bus(interface="virtual", channel=channel)
+    plain = can.Bus(interface="virtual", channel=channel)
+    watched = can.Bus(interface="virtual", channel=channel)
+    reader = virtual_reader(watched)
+    send_all = virtual_batch_sender(sender)
+    assert reader is not None and reader.take is not None and send_all is not None
+    try:
+        before = time.time()
+        send_all([can.Message(arbitration_id=0x223, data=bytes([i]), is_extended_id=False) for i in range(3)])
+        assert os.read(reader.fd, 100) == b"\0"  # one signal for the batch
+        reader.clear()
+        taken = [reader.take() for _ in range(4)]
+        assert [bytes(m.data) for m in taken if m is not None] == [b"\x00", b"\x01", b"\x02"]
+        assert taken[3] is None
+        assert all(m is not None and m.timestamp >= before and m.is_rx for m in taken[:3])
+        assert [bytes(m.data) for m in (plain.recv(1.0) for _ in range(3)) if m is not None] == [
+            b"\x00", b"\x01", b"\x02"
+        ]  # fmt: skip
+        # python-can's own recv on the swapped queue still works (with and without a timeout)
+        send_all([can.Message(arbitration_id=0x223, data=b"\x09", is_extended_id=False)])
+        got = watched.recv(1.0)
+        assert got is not None and bytes(got.data) == b"\x09" and watched.recv(0) is None
+    finally:
+        for bus in (sender, plain, watched):
+            bus.shutdown()
+        reader.close()
+
+
+def test_a_bounded_receiver_stays_bounded_when_read_by_a_pipe() -> None:
+    """A receiver opened with ``rx_queue_size`` keeps its bound after its queue is swapped for a
+    signalled one: a batch that does not fit fails the send, as python-can's own send does."""
+    channel = f"vq-{uuid.uuid4().hex[:6]}"
+    sender = can.Bus(interface="virtual", channel=channel)
+    small = can.Bus(interface="virtual", channel=channel, rx_queue_size=2)
+    reader = virtual_reader(small)
+    send_all = virtual_batch_sender(sender)
+    assert reader is not None and reader.take is not None and send_all is not None
+    try:
+        with pytest.raises(can.CanOperationError):
+            send_all([can.Message(arbitration_id=1, data=bytes([i])) for i in range(3)])
+        taken = [reader.take() for _ in range(3)]
+        assert [bytes(m.data) for m in taken if m is not None] == [b"\x00", b"\x01"] and taken[2] is None
+    finally:
+        sender.shutdown()
+        small.shutdown()
+        reader.close()

@@ -37,7 +37,7 @@ from adapters.errors import LinkError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["NONBLOCKING_SEND", "CanLink"]
+__all__ = ["NONBLOCKING_SEND", "CanLink", "virtual_batch_sender", "virtual_reader", "virtual_sender"]
 
 #: Interfaces whose ``bus.send(msg, timeout=0)`` returns at once, so frames go on the bus from the
 #: sender's own thread with no hand-off. python-can's ``virtual`` bus puts a copy of each frame into every
@@ -72,30 +72,71 @@ def _own_fileno(bus: can.BusABC) -> _LoopReader | None:
 
 class _SignalledQueue(queue.Queue[Any]):
     """A virtual bus's receive queue that also writes a byte to a pipe (from the sending thread) when a
-    frame arrives and none is signalled yet, so the loop can watch the pipe as it watches a socket: a
-    command's reply frames put back to back cost one write and one wake-up, not one each. The loop
-    empties the pipe, then calls :meth:`rearm`, then reads the queue: a frame put after that signals again."""
+    frame arrives and none is signalled yet, so a reader can watch the pipe as it watches a socket: a
+    command's reply frames put back to back cost one write and one wake-up, not one each. The reader
+    empties the pipe, then calls :meth:`rearm`, then reads the queue: a frame put after that signals again.
 
-    def __init__(self, wfd: int) -> None:
-        super().__init__()
+    Its reader takes frames without blocking (:meth:`take`) and waits on the pipe, never on the queue's
+    condition variables; so an unbounded queue (python-can's default) puts and takes on its deque alone
+    (``deque.append``/``popleft`` are atomic), without ``queue.Queue``'s two locks and a notify per frame.
+    A blocking ``get`` (python-can's ``recv`` with a timeout, which the readers here never call) still
+    works: it polls. A bounded queue (``rx_queue_size``) keeps ``queue.Queue``'s own behaviour."""
+
+    def __init__(self, wfd: int, maxsize: int = 0) -> None:
+        super().__init__(maxsize)
         self._wfd = wfd
         self._signalled = False
+        self._fast = maxsize <= 0
 
     def put(self, item: Any, block: bool = True, timeout: float | None = None) -> None:
-        super().put(item, block, timeout)
+        self.put_quiet(item, block, timeout)
+        self.signal()
+
+    def put_quiet(self, item: Any, block: bool = False, timeout: float | None = None) -> None:
+        """Put without signalling (the sender of a batch calls :meth:`signal` once after it)."""
+        if self._fast:
+            self.queue.append(item)
+        else:
+            super().put(item, block, timeout)
+
+    def signal(self) -> None:
         if not self._signalled:
             self._signalled = True
             try:  # noqa: SIM105 (per frame: contextlib.suppress builds an object per call)
                 os.write(self._wfd, b"\0")
-            except OSError:  # (a full pipe: the loop is due to read anyway; a closed one: no link)
+            except OSError:  # (a full pipe: the reader is due to read anyway; a closed one: no link)
                 pass
+
+    def get(self, block: bool = True, timeout: float | None = None) -> Any:
+        if not self._fast:
+            return super().get(block, timeout)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            try:
+                return self.queue.popleft()
+            except IndexError:
+                if not block or (deadline is not None and time.monotonic() >= deadline):
+                    raise queue.Empty from None
+                time.sleep(0.0005)
+
+    def qsize(self) -> int:
+        return len(self.queue) if self._fast else super().qsize()
+
+    def empty(self) -> bool:
+        return self.qsize() == 0
 
     def rearm(self) -> None:
         self._signalled = False
 
     def take(self) -> can.Message | None:
+        if self._fast:
+            try:
+                msg: can.Message = self.queue.popleft()
+            except IndexError:
+                return None
+            return msg
         try:
-            msg: can.Message = self.get_nowait()
+            msg = self.get_nowait()
         except queue.Empty:
             return None
         return msg
@@ -115,7 +156,7 @@ def _virtual_fileno(bus: can.BusABC) -> _LoopReader | None:
     rfd, wfd = os.pipe()
     os.set_blocking(rfd, False)
     os.set_blocking(wfd, False)
-    new = _SignalledQueue(wfd)
+    new = _SignalledQueue(wfd, old.maxsize)
     with lock:
         index = next((i for i, q in enumerate(channel) if q is old), None)
         if index is None:
@@ -146,6 +187,15 @@ def _virtual_fileno(bus: can.BusABC) -> _LoopReader | None:
     return _LoopReader(rfd, clear, close, take=new.take if bus.filters is None else None)
 
 
+def virtual_reader(bus: can.BusABC) -> _LoopReader | None:
+    """What a reader of python-can's ``virtual`` bus outside the loop watches (the simulated gimbal's
+    thread): the bus's queue swapped for a signalled one (see :func:`_virtual_fileno`), so the thread
+    waits on a pipe with ``select`` and takes its frames without ``queue.Queue``'s locks. Its ``take`` is
+    None when the bus has software filters (then ``bus.recv`` it is). ``close()`` the reader only after
+    ``bus.shutdown()``: a sender must not write to a descriptor number that was closed and reused."""
+    return _virtual_fileno(bus)
+
+
 def virtual_sender(bus: can.BusABC) -> Callable[[can.Message], None] | None:
     """A send for python-can's ``virtual`` bus that hands the frame itself to the receiver instead of a
     deep copy: what ``VirtualBus.send(msg, timeout=0)`` does (the same queues, timestamps, ``channel``,
@@ -154,6 +204,21 @@ def virtual_sender(bus: can.BusABC) -> Callable[[can.Message], None] | None:
     message: the caller built it for this send and never touches it again (a second receiver, if any,
     gets a plain copy). None when ``bus`` is not a virtual bus laid out as python-can 4 lays it out
     (then ``bus.send`` it is)."""
+    send_all = virtual_batch_sender(bus)
+    if send_all is None:
+        return None
+
+    def send(msg: can.Message) -> None:
+        send_all([msg])
+
+    return send
+
+
+def virtual_batch_sender(bus: can.BusABC) -> Callable[[list[can.Message]], None] | None:
+    """:func:`virtual_sender` for frames that go out back to back (one command's): each receiver gets
+    them all, in order, and then one signal (a :class:`_SignalledQueue` reader wakes once per batch,
+    not once per frame, and never finds half a command). Raises ``CanOperationError`` after the batch
+    when a receiver's queue was full or the bus is closed."""
     from can.interfaces import virtual
 
     if not isinstance(bus, virtual.VirtualBus):
@@ -168,24 +233,41 @@ def virtual_sender(bus: can.BusABC) -> Callable[[can.Message], None] | None:
     keep_time = bool(vbus.preserve_timestamps)
     clock = time.time
 
-    def send(msg: can.Message) -> None:
+    def send_all(msgs: list[can.Message]) -> None:
         if not vbus._open:
             raise can.CanOperationError("Cannot operate on a closed bus")
-        stamp = msg.timestamp if keep_time else clock()
         own = vbus.queue
         targets = [q for q in channel if q is not own or own_too]
         full = False
+        for msg in msgs:
+            if not keep_time:
+                msg.timestamp = clock()
         for i, target in enumerate(targets):
-            copy = msg if i == len(targets) - 1 else _copied(msg)  # the last one gets the original
-            copy.timestamp, copy.channel, copy.is_rx = stamp, channel_id, target is not own
-            try:
-                target.put(copy, block=True, timeout=0)
-            except queue.Full:
-                full = True
+            last = i == len(targets) - 1  # the last one gets the originals
+            quiet = target if isinstance(target, _SignalledQueue) else None
+            for msg in msgs:
+                copy = msg if last else _copied(msg)
+                copy.channel, copy.is_rx = channel_id, target is not own
+                try:
+                    if quiet is not None:
+                        quiet.put_quiet(copy)
+                    else:
+                        target.put(copy, block=True, timeout=0)
+                except queue.Full:
+                    full = True
+                    break
+            if quiet is not None:
+                quiet.signal()
         if full:
             raise can.CanOperationError("Could not send message to one or more recipients")
 
-    return send
+    return send_all
+
+
+def _send_each(bus: can.BusABC, msgs: list[can.Message]) -> None:
+    """A batch on a bus without a batch send: frame by frame, stopping at the first that fails."""
+    for msg in msgs:
+        bus.send(msg, timeout=0)
 
 
 def _copied(msg: can.Message) -> can.Message:
@@ -261,7 +343,8 @@ class CanLink:
         self._sender: threading.Thread | None = None
         self._direct = interface in NONBLOCKING_SEND  # sent by the caller's thread (see NONBLOCKING_SEND)
         self._send_lock = threading.Lock()  # a direct send: one command's frames together, in order
-        self._put: Callable[[can.Message], None] | None = None  # a direct send (virtual_sender) or None
+        #: a direct send of one command's frames (virtual_batch_sender) or None
+        self._put: Callable[[list[can.Message]], None] | None = None
         self._up = False
         self.frames_in = 0  # CAN frames on rx_id
         self.frames_out = 0
@@ -313,8 +396,8 @@ class CanLink:
         self._sendq = queue.SimpleQueue()
         self._put = None
         if self._direct:
-            put = virtual_sender(bus) if self.interface == "virtual" else None
-            self._put = put or (lambda msg: bus.send(msg, timeout=0))
+            put = virtual_batch_sender(bus) if self.interface == "virtual" else None
+            self._put = put or (lambda msgs: _send_each(bus, msgs))
         else:
             self._sender = threading.Thread(target=self._send_loop, args=(bus, self._sendq), daemon=True)
             self._sender.start()
@@ -344,11 +427,11 @@ class CanLink:
 
     def close(self) -> None:
         self._up = False
+        reader: _LoopReader | None = None
         if self._reader is not None:
             reader, self._reader = self._reader, None
             with contextlib.suppress(Exception):
                 self._loop.remove_reader(reader.fd)
-            reader.close()
         if self._notifier is not None:
             with contextlib.suppress(Exception):
                 self._notifier.stop(timeout=1.0)
@@ -367,23 +450,28 @@ class CanLink:
                 with contextlib.suppress(Exception):
                     port.close()
             self._bus = None
+        if reader is not None:  # after the bus left its channel: no sender writes to its pipe any more
+            reader.close()
 
     def _send_now(self, frames: list[tuple[int, bytes]], on_sent: Callable[[], None] | None) -> None:
-        """Put the frames on a bus whose send cannot block, from the calling thread (any thread)."""
+        """Put the frames on a bus whose send cannot block, from the calling thread (any thread): all of
+        one command's frames in one go (the receiver wakes once for them)."""
         put = self._put
+        msgs = [
+            can.Message(arbitration_id=arb_id, data=data, is_extended_id=False) for arb_id, data in frames
+        ]
         with self._send_lock:
+            try:
+                if put is None or self._bus is None:
+                    raise can.CanOperationError("bus closed")
+                put(msgs)
+            except (can.CanError, OSError, ValueError) as exc:
+                if self._up:  # (a link closed under a sender is not a send error)
+                    self.send_errors += 1
+                    self._from_thread(self._failed, f"send failed: {type(exc).__name__}: {exc}")
+                return
+            self.frames_out += len(frames)
             for arb_id, data in frames:
-                msg = can.Message(arbitration_id=arb_id, data=data, is_extended_id=False)
-                try:
-                    if put is None or self._bus is None:
-                        raise can.CanOperationError("bus closed")
-                    put(msg)
-                except (can.CanError, OSError, ValueError) as exc:
-                    if self._up:  # (a link closed under a sender is not a send error)
-                        self.send_errors += 1
-                        self._from_thread(self._failed, f"send failed: {type(exc).__name__}: {exc}")
-                    return
-                self.frames_out += 1
                 self._observe("tx", arb_id, data)
         if on_sent is not None:
             self._from_thread(on_sent)

@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import select
 import signal
 import threading
 import time
@@ -429,10 +430,12 @@ class GimbalCanSim:
         self.node = node or GimbalNode()
         self._bus = can.Bus(interface=interface, channel=channel, receive_own_messages=False, **bus_kwargs)
         self._can = can
-        from adapters.rsdk.link import virtual_sender
+        from adapters.rsdk.link import virtual_batch_sender, virtual_reader
 
-        # a real device's frames cost it nothing to put on the wire: on the in-process bus, no deep copy
-        self._put = (virtual_sender(self._bus) if interface == "virtual" else None) or self._bus.send
+        # a real device's frames cost it nothing to put on the wire: on the in-process bus, no deep copy;
+        # nor to take them off it: the thread waits on a pipe and takes frames without queue locks
+        self._put_all = virtual_batch_sender(self._bus) if interface == "virtual" else None
+        self._reader = virtual_reader(self._bus) if interface == "virtual" else None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="gimbal-sim", daemon=True)
         self.paused = False
@@ -450,6 +453,8 @@ class GimbalCanSim:
         self._stop.set()
         self._thread.join(timeout=5)
         self._bus.shutdown()
+        if self._reader is not None:  # (after the shutdown: no sender writes to its pipe any more)
+            self._reader.close()
 
     def __enter__(self) -> GimbalCanSim:
         return self.start()
@@ -458,17 +463,37 @@ class GimbalCanSim:
         self.stop()
 
     def _send(self, frames: list[tuple[int, bytes]]) -> None:
-        for arb_id, data in frames:
-            self._put(self._can.Message(arbitration_id=arb_id, data=data, is_extended_id=False))
+        if not frames:
+            return
+        msgs = [
+            self._can.Message(arbitration_id=arb_id, data=data, is_extended_id=False)
+            for arb_id, data in frames
+        ]
+        if self._put_all is not None:  # one command's reply frames together: the gateway wakes once
+            self._put_all(msgs)
+            return
+        for msg in msgs:
+            self._bus.send(msg)
 
     #: frames taken in one go before the model's clock ticks (a command's frames arrive back to back)
     BATCH = 64
 
     def _run(self) -> None:
+        reader = self._reader
+        take = reader.take if reader is not None else None
+        more = False  # frames left waiting after a full batch: no wait before the next one
         while not self._stop.is_set():
-            msg = self._bus.recv(timeout=0.01)
+            if reader is not None and take is not None:
+                if not more and select.select([reader.fd], [], [], 0.01)[0]:
+                    reader.clear()  # first: a frame put after this signals again
+                msg = take()
+            else:
+                msg = self._bus.recv(timeout=0.01)
             now = time.monotonic()
-            if self.paused:
+            more = False
+            if self.paused:  # a gimbal that does not answer: what arrives meanwhile is lost
+                while take is not None and msg is not None:
+                    msg = take()
                 continue
             for taken in range(1, self.BATCH + 1):  # the frames waiting, each answered as it completes
                 if msg is None:
@@ -479,7 +504,10 @@ class GimbalCanSim:
                         self._bus.send(self._can.Message(arbitration_id=0x088, is_error_frame=True, dlc=8,
                                                          data=bytes(8)))  # fmt: skip
                     self._send(replies)
-                msg = self._bus.recv(0) if taken < self.BATCH else None  # (the rest: next turn)
+                if taken == self.BATCH:  # (the rest: next turn, after the model's clock ticks)
+                    more = True
+                    break
+                msg = take() if take is not None else self._bus.recv(0)
             self._send(self.node.tick(now))
 
 
