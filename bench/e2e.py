@@ -255,7 +255,53 @@ def run(cfg: Config) -> list[Row]:
         }
     for i, (where, samples) in enumerate(placements.items()):
         rows += _rows(where, samples, n, first=i == 0)
+    rows.append(_after_idle(100 if cfg.quick else 1000))
     return rows
+
+
+def _after_idle(n: int, idle: float = 0.001) -> Row:
+    """What this machine does to code that runs after the processor idled (no target: it explains the
+    round trips above, and why they differ between machines). The gateway's own request work (validate
+    a ``services`` request, build its reply, serialise it) timed back to back, then each after ``idle``
+    seconds of sleep, as every step of a sequential round trip runs: the request's thread has slept
+    while the broker, the cloud client or the gimbal worked."""
+    from gateway.app import build_registry
+    from schemas.replies import reply_for
+    from schemas.topics import TopicKind
+
+    registry = build_registry()
+    payload = json.dumps({"tid": "t-1", "bid": "b", "timestamp": 0, "method": "x_rsdk_version_get",
+                          "data": {"payload_index": "20-0-0"}}).encode()  # fmt: skip
+
+    output = {"device_id": 0, "version": "01.02.03.04"}
+
+    def work() -> None:
+        request = registry.validate(TopicKind.SERVICES, payload)
+        reply_for(request, 0, output, timestamp=1, gateway=GW).model_dump_json()
+
+    def timed(sleep: float) -> list[float]:
+        out = []
+        for _ in range(n):
+            if sleep:
+                time.sleep(sleep)
+            t0 = time.perf_counter()
+            work()
+            out.append((time.perf_counter() - t0) * 1e6)
+        return out
+
+    timed(0)  # warm-up
+    hot, cold = timed(0), timed(idle)
+    return Row(
+        group="e2e",
+        case=f"machine: a request's validate + reply + serialise after {idle * 1000:g} ms idle, p50",
+        count=n,
+        rate=statistics.median(cold),
+        base_rate=statistics.median(hot),
+        base_count=n,
+        unit="us",
+        note="baseline: the same work back to back; the ratio is what idling costs every step of a "
+        "sequential round trip on this machine (no target)",
+    )
 
 
 def _rows(where: str, samples: dict[str, list[float]], n: int, first: bool) -> list[Row]:
