@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import getpass
 import os
+import random
 import shutil
 import signal
 import socket
@@ -42,7 +43,34 @@ def _mosquitto_passwd() -> str:
     return found
 
 
+#: where :func:`free_port` looks first: below Linux's default ephemeral range (32768-60999)
+_STABLE_PORTS = (20000, 32767)
+
+
+def _ephemeral_low() -> int:
+    """The lowest port the kernel hands to connections as their local end (32768 where unreadable)."""
+    try:
+        return int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768
+
+
 def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port nothing listens on or holds now, chosen outside the kernel's ephemeral range where it
+    can: a broker restarted on the same port (the outage and failover tests kill nodes and start them
+    again) must not find it taken meanwhile by some connection's local end, which the kernel picks from
+    that range (seen: a NATS node that could not listen again on its port). Falls back to a port the
+    kernel picks when none below the range is free."""
+    low, high = _STABLE_PORTS[0], min(_STABLE_PORTS[1], _ephemeral_low() - 1)
+    pick = random.SystemRandom()
+    for _ in range(100 if high > low else 0):
+        port = pick.randint(low, high)
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            try:
+                s.bind((host, port))
+            except OSError:
+                continue
+            return port
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind((host, 0))
         return int(s.getsockname()[1])
