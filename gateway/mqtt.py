@@ -374,6 +374,8 @@ class MqttBridge:
             info = self._client.publish(topic, payload, qos=0)
             if info.rc != paho.MQTT_ERR_SUCCESS:  # the link dropped again: keep the rest, in order
                 self._buffer.put_back(items[n:])
+                if n:
+                    self._metrics.inc("telemetry_delivered_late_total", n, link=self._name)
                 self._count_buffer()
                 return n
             self._remember(topic, payload)
