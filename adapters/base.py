@@ -182,6 +182,12 @@ class Adapter(abc.ABC):
         """Stop every motion at once (brake / stop / zero speed). Thread-safe, fire-and-forget."""
         return None
 
+    def autonomous_task(self) -> str | None:
+        """What flies this device on its own now (a mission, a take-off, the device's own return home),
+        in words, as the device reports it; None when nothing does. Live control refuses sticks while
+        one does (the device would ignore them). Called from network threads: reads only."""
+        return None
+
     def state_snapshot(self) -> Mapping[str, Any] | None:
         """The current ``state`` body (published after every connect), or None."""
         return None

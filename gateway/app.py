@@ -29,6 +29,7 @@ from gateway.mqtt import MqttBridge
 from gateway.northbound import Northbound
 from gateway.observability import Observability
 from gateway.settings import GatewaySettings
+from gateway.store import StateStore
 from gateway.wayline.service import WaylineService
 from schemas import TopicKind, default_registry, subscriptions, topic
 from schemas.registry import Registry
@@ -80,6 +81,7 @@ class GatewayApp:
         self.northbound: Northbound | None = None
         self.drc: DrcController | None = None
         self.wayline: WaylineService | None = None  # flighttask_* / return_home* (gateway/wayline)
+        self.store: StateStore | None = None  # what must outlive the process (gateway/store.py)
         self.observability: Observability | None = None  # /metrics, /healthz, /status, / (None: off)
         #: told (topic, payload) of every message the northbound and the dispatcher publish, and of every
         #: message the dispatcher is handed (not drc/down, answered inline): the web console's log
@@ -129,6 +131,11 @@ class GatewayApp:
         drc.start()
         requests = CloudRequests(gateway_sn=gw, registry=self.registry, outbox=outbox, clock=self.clock,
                                  metrics=self.metrics)  # fmt: skip
+        store = self.store = StateStore(s.state_dir)
+        if s.state_dir is None:
+            log.info("no state_dir: wayline tasks in flight are kept in memory only (not across a restart)")
+        else:
+            log.info("state kept in %s", store.path)
         wayline = self.wayline = WaylineService(
             gateway_sn=gw,
             devices=self.devices,
@@ -137,6 +144,7 @@ class GatewayApp:
             clock=self.clock,
             metrics=self.metrics,
             require_authority=s.dispatcher.require_authority,
+            store=store,
         )
         # the will and the clean goodbye are the same: a topology with no sub-devices (all offline)
         offline = (topic(TopicKind.STATUS, gw), nb.topology(offline=True))
@@ -223,6 +231,8 @@ class GatewayApp:
         await asyncio.gather(*(a.stop() for a in self.devices), return_exceptions=True)
         if self.observability is not None:
             await asyncio.to_thread(self.observability.stop)
+        if self.store is not None:
+            self.store.close()
         log.info("stopped")
 
 

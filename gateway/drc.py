@@ -293,8 +293,6 @@ class DrcController:
         self.cmd_delay_ms = 0.0
         self.osd_hz = 10
         self.hsi_hz = 1
-        #: the failsafe that fired last and when it first fired (wall clock, ms); None: none holds
-        self.failsafe: tuple[str, int] | None = None
         #: the last heartbeats as (received, the cloud's send time), wall clock ms: the web console's chart
         self.heartbeats: deque[tuple[int, int]] = deque(maxlen=120)
         self.writer = MotionWriter(
@@ -393,7 +391,9 @@ class DrcController:
         broker = data.mqtt_broker
         if broker.expire_time and broker.expire_time < self.clock.time_ms() / 1000:
             return ResultCode.INVALID_PARAMETERS, {"reason": "mqtt_broker credentials already expired"}
-        denied = self._authority_problem()
+        # during an automatic task the session is entered all the same (payloads, pushes, the stop on
+        # drc/down); its sticks are refused until the task is paused or ends (docs/drc.md)
+        denied = self._authority_problem(sticks=False)
         if denied is not None:
             return denied
         host, _, port_text = broker.address.rpartition(":")
@@ -548,13 +548,23 @@ class DrcController:
         self._feed(ds.BrokerLost(self.now(), session))
 
     # -- authority (the loop) -------------------------------------------------------------------
-    def _authority_problem(self) -> tuple[int, dict[str, Any]] | None:
-        """Called for every stick: reads two set sizes, builds nothing (the device table is fixed)."""
+    def _authority_problem(self, *, sticks: bool = True) -> tuple[int, dict[str, Any]] | None:
+        """Called for every stick: reads two set sizes and what each driven device says flies it, builds
+        nothing unless it refuses (the device table is fixed). A device an automatic task flies (a
+        wayline, a take-off, the FC's go home) ignores sticks: they are refused (314000) with what flies
+        it, never answered 0."""
         auth = self.devices.authority
         if self._has_movable and not auth.flight:
             return ResultCode.NO_FLIGHT_AUTHORITY, {"reason": "grab flight authority first"}
         if not self._has_movable and not auth.payloads:
             return ResultCode.NO_PAYLOAD_AUTHORITY, {"reason": "grab payload authority first"}
+        if not sticks:
+            return None
+        for adapter in self._targets:
+            busy = adapter.autonomous_task()
+            if busy is not None:
+                reason = f"{busy} flies {adapter.info.sn}: stop it (or wait for its end) to fly by sticks"
+                return ResultCode.BUSY, {"reason": reason}
         return None
 
     def refresh_targets(self) -> None:
@@ -642,6 +652,7 @@ class DrcController:
                 setpoint,
                 authorized=problem is None,
                 denied_result=int(problem[0]) if problem is not None else 0,
+                denied_reason=str(problem[1].get("reason", "")) if problem is not None else "",
             )
         )
 
@@ -745,17 +756,22 @@ class DrcController:
             log.error("DRC: %s failed on device %s: %s: %s", what, device, type(exc).__name__, exc)
 
     # -------------------------------------------------------------- events and osd (the loop)
+    @property
+    def failsafe(self) -> tuple[str, int] | None:
+        """The failsafe that holds or fired last in this session and when its incident began (wall clock,
+        ms); None: none. Read from the session, its one owner (cleared when the session ends)."""
+        session = self.session
+        reason, since = session.failsafe, session.failsafe_since
+        if reason is None or since is None:
+            return None
+        return reason, self.clock.time_ms() - round((self.now() - since) * 1000.0)
+
     def _failsafe(self, action: ds.Failsafe) -> None:
-        if action.reason is None:
-            self.failsafe = None
-        else:
-            if action.fired:
-                self.metrics.inc("drc_failsafe_stops_total", reason=action.reason)
-                # sticks stopping is how an operator lets go: routine; every other failsafe is news
-                level = logging.INFO if action.reason == "sticks" else logging.WARNING
-                log.log(level, "DRC failsafe: %s: motion stopped", action.reason)
-            if self.failsafe is None or self.failsafe[0] != action.reason:
-                self.failsafe = (action.reason, self.clock.time_ms())
+        if action.reason is not None and action.fired:
+            self.metrics.inc("drc_failsafe_stops_total", reason=action.reason)
+            # sticks stopping is how an operator lets go: routine; every other failsafe is news
+            level = logging.INFO if action.reason == "sticks" else logging.WARNING
+            log.log(level, "DRC failsafe: %s: motion stopped", action.reason)
         self._in_loop(self._publish_osd, self.session.drc_state)
 
     def _report(self, state: int, result: int) -> None:

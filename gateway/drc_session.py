@@ -216,6 +216,7 @@ class Stick:
     setpoint: SetPoint
     authorized: bool = True
     denied_result: int = NO_FLIGHT_AUTHORITY
+    denied_reason: str = ""  # why it is not authorized (no authority, an automatic task flies the device)
 
 
 @dataclass(frozen=True, slots=True)
@@ -386,6 +387,9 @@ class DrcSession:
         self.state = State.IDLE
         self.setpoint: SetPoint = ZERO
         self.failsafe: str | None = None  # the failsafe holding or last fired, None when driving freely
+        #: when the failsafe's incident began (the ``at`` of the event that fired it first); one value per
+        #: incident: a failsafe firing again while it holds keeps it, a new incident starts a new one
+        self.failsafe_since: float | None = None
         self.closed = False  # after Shutdown: every Enter is refused
         self._session: _Session | None = None
         self._next_id = 1
@@ -438,6 +442,9 @@ class DrcSession:
             "heartbeat_age_s": age(s.last_heartbeat) if s is not None else None,
             "stick_age_s": age(s.last_stick) if s is not None else None,
             "failsafe": self.failsafe,
+            "failsafe_age_s": round(now - self.failsafe_since, 3)
+            if self.failsafe_since is not None
+            else None,
         }
 
     # ----------------------------------------------------------------------------------- driver
@@ -508,7 +515,8 @@ class DrcSession:
         s.last_seq, s.sticks_fresh = None, False
         s.holds.clear()
         self.setpoint = ZERO
-        self.failsafe = None
+        if self.failsafe is not None:  # left from a session before: nothing of it holds in this one
+            self._clear_failsafe(out, event.at)
         out.add(Motion(ZERO, True, event.at))
         self._set_state(out, State.ACTIVE, SUCCESS)
         if s.enter is not None:
@@ -534,6 +542,8 @@ class DrcSession:
             return
         self._session = None
         self.state = State.IDLE  # drc_state was already reported 0 on entering EXITING
+        if self.failsafe is not None:  # the session is over: so is its failsafe
+            self._clear_failsafe(out, event.at)
         if s.enter is not None:  # shut down while connecting
             out.add(Reply(s.enter, BUSY, "the gateway is stopping"))
         for request in s.exit_requests:
@@ -594,7 +604,8 @@ class DrcSession:
                 return  # clouds publish each DRC message several times: one effect, one answer
         if not event.authorized:
             out.add(Count("authority"))
-            out.add(StickReply(event.request, event.denied_result, seq, "no control authority"))
+            reason = event.denied_reason or "no control authority"
+            out.add(StickReply(event.request, event.denied_result, seq, reason))
             return
         if Hold.HEARTBEAT in s.holds:
             out.add(Count("held"))
@@ -611,8 +622,7 @@ class DrcSession:
         s.last_stick = event.at
         s.sticks_fresh = True
         if self.failsafe is not None:  # a stick or authority failsafe: the operator drives again
-            self.failsafe = None
-            out.add(Failsafe(None, event.at))
+            self._clear_failsafe(out, event.at)
         self.setpoint = event.setpoint
         out.add(Motion(event.setpoint, True, event.at))
         out.add(StickReply(event.request, SUCCESS, seq))
@@ -718,16 +728,22 @@ class DrcSession:
             out.add(Failsafe(self.failsafe, at, fired=False))
             return
         self.state = State.ACTIVE
-        self.failsafe = None
-        out.add(Failsafe(None, at))
+        self._clear_failsafe(out, at)
 
     def _zero(self, out: _Out, at: float, *, stream: bool) -> None:
         self.setpoint = ZERO
         out.add(Motion(ZERO, stream, at))
 
     def _fire(self, out: _Out, reason: str, at: float) -> None:
+        if self.failsafe != reason or self.failsafe_since is None:
+            self.failsafe_since = at  # a new incident (the same one firing again keeps its start)
         self.failsafe = reason
         out.add(Failsafe(reason, at))
+
+    def _clear_failsafe(self, out: _Out, at: float) -> None:
+        self.failsafe = None
+        self.failsafe_since = None
+        out.add(Failsafe(None, at))
 
     def _set_state(self, out: _Out, state: State, result: int) -> None:
         before = DRC_STATE[self.state]

@@ -358,6 +358,11 @@ class GatewaySettings(BaseSettings):
     osd_period: float = Field(2.0, gt=0, description="periodic osd (0.5 Hz by default, per device override)")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     log_json: bool = False
+    state_dir: Path | None = Field(
+        None,
+        description="where the crash-safe store keeps what must outlive the process (wayline tasks in "
+        "flight); unset: kept in memory only, so a restarted gateway cannot report a task it had started",
+    )
 
     @model_validator(mode="after")
     def _unique(self) -> GatewaySettings:

@@ -513,3 +513,78 @@ def test_the_console_state_carries_the_route_progress_and_break_point(rig: dict[
     bp = _progress(cloud, flight)[-1]["data"]["output"]["ext"]["break_point"]
     assert ended["break_point"] == bp and bp["break_reason"] == 1283
     assert ended["route"] == shown["route"]  # the same route: the page does not fetch it again
+
+
+def _flying_leg_one(rig: dict[str, Any], flight: str) -> None:
+    """Wait until the route flies between waypoints 0 and 1 at speed."""
+    cloud, fc = rig["cloud"], rig["fc"]
+    wait_until(
+        lambda: (
+            any(e["data"]["output"]["ext"]["current_waypoint_index"] >= 1 for e in _progress(cloud, flight))
+            and fc.inspect(lambda m: m.speed) > 3.0
+        ),
+        60,
+        what="flying the route",
+    )
+
+
+def _osd_mode(cloud: CloudClient) -> int:
+    return int(cloud.find(f"{SN}/osd", lambda b: "mode_code" in b["data"])[-1]["data"]["mode_code"])
+
+
+@pytest.mark.slow
+def test_an_emergency_stop_ends_the_task_and_a_new_one_flies(rig: dict[str, Any]) -> None:
+    """drone_emergency_stop during a wayline: the FC brakes and drops its mission; within 3 s the task
+    ends (canceled, with a break point), the osd leaves mode_code 5, and the next task is accepted and
+    flies to ok (issue #31: no state from which only return_home helps)."""
+    cloud, fc = rig["cloud"], rig["fc"]
+    flight = _prepare_and_execute(rig)
+    _flying_leg_one(rig, flight)
+    assert _osd_mode(cloud) == 5
+    cloud.publish(f"thing/product/{GW}/drc/down", json.dumps({"method": "drone_emergency_stop", "data": {}}), 0)
+    stopped_at = time.monotonic()
+    terminal = ("canceled", "failed", "ok")
+    wait_until(lambda: _status(cloud, flight)[-1] in terminal, 3.0, what="a terminal progress")
+    assert time.monotonic() - stopped_at < 3.0
+    final = _progress(cloud, flight)[-1]["data"]
+    assert final["output"]["status"] == "canceled", final
+    bp = final["output"]["ext"]["break_point"]
+    assert bp["index"] == 0 and bp["state"] == 0 and 0.0 < bp["progress"] < 1.0, bp  # on the first leg
+    assert fc.inspect(lambda m: m.run) is None  # the FC dropped its mission
+    wait_until(lambda: math.hypot(*fc.inspect(lambda m: (m.vn, m.ve))) < 0.5, 3.0, what="braked")
+    cloud.clear()
+    wait_until(lambda: cloud.find(f"{SN}/osd", lambda b: "mode_code" in b["data"]), 5, what="a fresh osd")
+    assert _osd_mode(cloud) != 5
+    # nothing is left running: pause and undo say so, and a new task flies
+    assert cloud.service("flighttask_pause", None)["data"]["result"] == 319046
+    again = _prepare_and_execute(rig)
+    wait_until(lambda: _status(cloud, again)[-1] in terminal, 90, what="the next task flown")
+    assert _status(cloud, again)[-1] == "ok", _status(cloud, again)
+
+
+@pytest.mark.slow
+def test_sticks_during_a_wayline_are_refused_and_do_nothing(rig: dict[str, Any]) -> None:
+    """A DRC session entered during a wayline is accepted (payloads, pushes, the stop), but its sticks are
+    answered with a non-zero result naming what flies the aircraft, and the route flies on unchanged."""
+    cloud, fc = rig["cloud"], rig["fc"]
+    flight = _prepare_and_execute(rig)
+    _flying_leg_one(rig, flight)
+    broker = rig["gw"].app.settings.broker.url
+    host_port = broker.split("//", 1)[1]
+    link = {"address": host_port, "client_id": "drc-wayline", "username": "", "password": "",
+            "expire_time": int(time.time()) + 600, "enable_tls": False}  # fmt: skip
+    r = cloud.service("drc_mode_enter", {"mqtt_broker": link, "osd_frequency": 5, "hsi_frequency": 1})
+    assert r["data"]["result"] == 0, r
+    down = f"thing/product/{GW}/drc/down"
+    for seq in range(1, 6):
+        cloud.publish(down, json.dumps({"method": "heart_beat", "data": {"seq": seq, "timestamp": 1}}), 0)
+        stick = {"seq": seq, "x": 3.0, "y": 0.0, "h": 0.0, "w": 0.0}
+        cloud.publish(down, json.dumps({"method": "drone_control", "data": stick}), 0)
+        time.sleep(0.1)
+    answers = wait_until(
+        lambda: cloud.find("drc/up", lambda b: b.get("method") == "drone_control") or None, 5, what="answers"
+    )
+    assert all(a["data"]["result"] == 314000 for a in answers), answers
+    assert "waypoint mission" in answers[0]["data"]["output"]["reason"] or "wayline" in str(answers[0])
+    wait_until(lambda: _status(cloud, flight)[-1] == "ok", 90, what="the route flown to its end")
+    assert cloud.service("drc_mode_exit", {})["data"]["result"] == 0

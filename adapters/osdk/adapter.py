@@ -37,8 +37,9 @@ import asyncio
 import contextlib
 import logging
 import math
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+import secrets
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 from adapters.base import AircraftPose, CallResult, DeviceInfo, Handler, TelemetrySink
@@ -61,6 +62,18 @@ from adapters.osdk.extensions import (
     IdleVelocity,
     Pause,
 )
+from adapters.osdk.mission import (
+    AUTOMATIC,
+    DM_AUTO_LANDING,
+    DM_AUTO_TAKEOFF,
+    DM_GO_HOME,
+    KIND_WORDS,
+    STATUS_STALE,
+    FcMissionState,
+    Task,
+    reconcile,
+)
+from adapters.osdk.mission import mode_code as compute_mode_code
 from adapters.osdk.protocol import Decoder, DuplicateFilter, Frame, SessionMode, SessionTable
 from adapters.osdk.telemetry import ITEMS as _TELEMETRY_ITEMS
 from adapters.osdk.wayline import OsdkWayline
@@ -75,13 +88,15 @@ from schemas.services import FlightAuthorityGrab, FlyToPoint, FlyToPointStop, Ta
 
 log = logging.getLogger(__name__)
 
-__all__ = ["AircraftAdapter"]
+__all__ = ["AircraftAdapter", "Task"]
 
 EARTH_RADIUS_M = 6_378_137.0
 OBTAIN_RETRIES = 5  # "in progress" answers before giving up
 CONTROL_OBTAINED, CONTROL_RELEASED = 0x0002, 0x0001
 CONTROL_IN_PROGRESS = (0x0003, 0x0004)
 CONTROL_RC_OWNS = (0x0000, 0x0005, 0x0006)
+MISSION_NOT_RUNNING = 0xD4  # ground-station ACK: no mission is running
+CONTROL_DEVICE_SDK = 2  # the control-device item's device_status: 0 RC, 1 mobile app, 2 onboard (SDK)
 AUTO_TAKEOFF = 11  # display mode while the FC's own take-off runs: missions are refused until it ends
 #: fly_to_point_progress while flying between points: twice a second, so the cloud hears from the flight
 #: at least once a second (DJI's devices report it continuously; the seed's waypoint events alone leave a
@@ -92,6 +107,8 @@ MAX_MISSION_POINTS = 255  # the mission init's u8 length (seed 004 0x03 0x10)
 MIN_WAYPOINT_SPACING = 0.5  # m between neighbouring waypoints (the FC refuses closer ones: 0xE5)
 #: takeoff_to_point's rc_lost_action (Cloud API enum) as the ``rc_lost_action`` setting names it
 _RC_LOST_ACTIONS = {0: "hover", 1: "land", 2: "return_home"}
+#: an M100's flight status (1 standby, 2 taking off, 3 in air, 4 landing, 5 landed) as a display mode
+_M100_DISPLAY = {2: DM_AUTO_TAKEOFF, 4: DM_AUTO_LANDING}
 
 
 @dataclass
@@ -118,25 +135,6 @@ class Telemetry:
         if self.altitude is None or self.height is None:
             return None
         return self.altitude - self.height
-
-
-@dataclass
-class Task:
-    """A fly-to or take-off task in flight: which Cloud API event reports it, and where it is."""
-
-    kind: str  # "fly_to" | "takeoff"
-    task_id: str  # fly_to_id / flight_id
-    points: int
-    done: asyncio.Event = field(default_factory=asyncio.Event)
-    reached: int = -1
-    offset: int = 0  # waypoints the gateway prepended: the cloud's index = mission index - offset
-    finished: bool = False
-    failed: int | None = None
-    #: told the mission index of every waypoint reached (wayline tasks: adapters/osdk/wayline.py)
-    on_reached: Callable[[int], None] | None = None
-    path: list[tuple[float, float, float]] = field(default_factory=list)  # lat, lon, m above take-off
-    speed: float = 0.0  # the mission's planned speed (m/s)
-    planned: list[dict[str, float]] = field(default_factory=list)  # the cloud's points (WGS84 height)
 
 
 def _leg(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
@@ -176,7 +174,13 @@ class AircraftAdapter(SupervisedAdapter):
         self.deadline = settings.deadline
         self._decoder = Decoder()
         # each command waiting for its ACK is tagged with its waiter: the future and the command's name
-        self._sessions: SessionTable[tuple[asyncio.Future[cmds.Message], str]] = SessionTable()
+        # The first seq is random: the FC remembers the last seq per session and answers a repeat with the
+        # stored ACK instead of acting, and it does not know that this is a new process. A restarted
+        # gateway that counted from 0 again would have its first commands taken for resends of the old
+        # process's (seen with the simulator in its own process: a pause got an activation's ACK).
+        self._sessions: SessionTable[tuple[asyncio.Future[cmds.Message], str]] = SessionTable(
+            first_seq=secrets.randbelow(0x10000)
+        )
         self._dups = DuplicateFilter()
         self.activated = False
         self._next_activation = 0.0  # when an unactivated FC is next asked (version, activation, rates)
@@ -186,7 +190,23 @@ class AircraftAdapter(SupervisedAdapter):
         self.activation_error: str | None = None
         self.telemetry = Telemetry()
         self.has_control = False
+        #: the mission task the FC flies (intent; :mod:`adapters.osdk.mission` reconciles it with the FC)
         self.mission: Task | None = None
+        #: the FC's waypoint mission as its pushes say (the truth the task is held against)
+        self.fc = FcMissionState()
+        self._disagree_since: float | None = None
+        #: a stop the gateway asked of the FC itself (an emergency brake, the RC taking over): the reason
+        #: a mission the FC then drops ended with. Written from the DRC writer thread (a str assignment)
+        self._stop_requested: str | None = None
+        self._mission_ended_at = float("-inf")  # when the last task ended (its status pushes fade after)
+        self._ended_task: Task | None = None
+        #: who the FC says controls it (the control-device item: 0 RC, 1 mobile app, 2 onboard/SDK), None
+        #: until it said so on this link
+        self.control_device: int | None = None
+        self._safety_check_due = False  # after each (re)activation, once the FC's state is known
+        #: when live control last drove the aircraft (drive(); the DRC writer thread)
+        self.driven_at = float("-inf")
+        self.safety_stops = 0  # restarts or reconnects that found the aircraft moving with nobody driving
         #: where the aircraft last stood on the ground (latitude, longitude): the home of a wayline's RTH
         self.home_position: tuple[float, float] | None = None
         self.wayline = OsdkWayline(self)
@@ -234,7 +254,7 @@ class AircraftAdapter(SupervisedAdapter):
         without waiting for anything; then what ``on_stop`` says (a mission in flight is cancelled)."""
         self.send_movement(0.0, 0.0, 0.0, 0.0)
         task = self.mission
-        if task is not None and not task.finished:
+        if task is not None and task.live:
             with contextlib.suppress(Exception):
                 self._fire("wp_start_stop", {"start": 1})
             # the cloud hears the task's end (its final progress event), as after fly_to_point_stop
@@ -292,12 +312,14 @@ class AircraftAdapter(SupervisedAdapter):
         which the FC does not check)."""
         if not self.has_control or self._link is None or not self._link.up:
             return False
+        self.driven_at = self._now()
         self.send_movement(forward, right, up, yaw_rate)
         return True
 
     def emergency_stop(self) -> None:
         """Brake now (the 26-byte emergency brake, firmware >= 3.2.36.6; an M100 has none) and zero
-        velocity with the stable bit after it."""
+        velocity with the stable bit after it. A mission the FC drops for it ends as stopped by it."""
+        self._stop_requested = "emergency stop"
         if self.codes.emergency_brake:
             self.emergency_brake()
         self.send_movement(0.0, 0.0, 0.0, 0.0)
@@ -308,6 +330,10 @@ class AircraftAdapter(SupervisedAdapter):
         self._dups.reset()  # a frame on the new link is no resend of one on the old, whatever its seq
         self.activated = False
         self._next_activation = 0.0
+        # what the FC said on the old link no longer holds: read it again before acting on it
+        self.control_device = None
+        self.telemetry.flight = None
+        self.fc.reset()
 
     async def _supervise_tick(self, now: float) -> None:
         """Activate first (the FC stays offline until activated, and answers nothing else before),
@@ -315,7 +341,170 @@ class AircraftAdapter(SupervisedAdapter):
         if not self.activated and now >= self._next_activation:
             self._next_activation = now + 3.0
             await self._activate()
+        if self.activated:
+            self._truth(now)
         self._check_silence(now)
+
+    # -- the FC is the source of truth (adapters/osdk/mission.py) -----------------------------------
+    @property
+    def clock(self) -> Clock:
+        return self._clock
+
+    @property
+    def display_mode(self) -> int | None:
+        return self.telemetry.display_mode
+
+    @property
+    def current_mission(self) -> Task | None:
+        return self.mission
+
+    def begin_mission(self, task: Task) -> None:
+        """``task`` is the mission the FC flies from now on: its pushes go to it."""
+        old = self.mission
+        if old is not None and old is not task and old.live:
+            old.finished = True  # replaced (a chained mission, a new task): it is over
+        self.mission = task
+        self._stop_requested = None
+        self._disagree_since = None
+
+    def mission_started(self, task: Task) -> None:
+        """The FC acknowledged the start of ``task``'s mission: from now on it may disagree."""
+        task.started = True
+
+    def mission_stopped(self) -> None:
+        """The FC acknowledged a stop (or said no mission runs): its last status push no longer holds."""
+        self.fc.status_at = float("-inf")
+
+    def fc_mission_running(self) -> bool:
+        """Does the FC fly (or hold, paused) a waypoint mission, by its own pushes?"""
+        return self.fc.running(self.telemetry.display_mode, self._now())
+
+    def autonomous_task(self) -> str | None:
+        """What flies the aircraft on its own now (take-off, landing, go home, a mission), in words; None
+        when nothing does. Live control's sticks are refused while one does: the FC ignores movement
+        control then, and a stick answered 0 would be a lie."""
+        t = self.telemetry
+        if t.flight is None:
+            return None
+        dm = t.display_mode
+        if dm is not None and dm in AUTOMATIC and (self.in_air or dm == DM_AUTO_TAKEOFF):
+            return AUTOMATIC[dm]
+        if self.in_air and self.fc_mission_running():
+            task = self.mission
+            return KIND_WORDS.get(task.kind, "waypoint mission") if task is not None else "waypoint mission"
+        task = self.mission
+        if task is not None and task.live and task.started:
+            return KIND_WORDS.get(task.kind, "mission")
+        return None
+
+    def _truth(self, now: float) -> None:
+        """Hold the gateway's intent against what the FC reports, every supervision pass (0.1 s)."""
+        t = self.telemetry
+        if t.flight is None:
+            return  # nothing reported on this link yet
+        if self._safety_check_due and self.control_device is not None:
+            self._safety_check_due = False
+            self._safety_check(now)
+        task = self.mission
+        if task is not None and task.kind == "go_home" and task.live and task.started and not self.in_air:
+            task.finished = True  # the FC's go home ends on the ground at home
+            task.done.set()
+        running = self.fc.running(t.display_mode, now)
+        if task is not None and task.kind == "go_home":
+            running = t.display_mode in (DM_GO_HOME, DM_AUTO_LANDING)  # the FC's own, not a mission
+        broken = self.fc.broken_at >= now - 1.0 and self.fc.broken_at > self._mission_ended_at
+        verdict, self._disagree_since = reconcile(
+            task,
+            running,
+            disagree_since=self._disagree_since,
+            now=now,
+            stop_requested=self._stop_requested,
+            broken=broken,
+        )
+        if verdict is not None and task is not None:
+            self._drop(task, verdict.reason, now)
+            return
+        if task is not None and not task.live and task is not self._ended_task:
+            self._ended_task = task  # ended here (finished, stopped, failed): its status pushes fade
+            self._mission_ended_at = now
+        if (
+            running
+            and self.in_air
+            and (task is None or not task.live)
+            and now - self._mission_ended_at > STATUS_STALE + 0.5
+        ):
+            self._adopt(now)
+
+    def _drop(self, task: Task, reason: str, now: float) -> None:
+        """The FC no longer flies ``task``: it ends, with the reason, and whoever follows it is told."""
+        task.dropped = reason
+        task.done.set()
+        self._mission_ended_at = now
+        self._ended_task = task
+        self._stop_requested = None
+        log.warning(
+            "aircraft %s: %s %s ended by the flight controller: %s",
+            self.info.sn,
+            KIND_WORDS.get(task.kind, task.kind),
+            task.task_id or "(adopted)",
+            reason,
+        )
+        self._notify("mission_ended", reason, task.task_id)
+
+    def _adopt(self, now: float) -> None:
+        """A waypoint mission the FC flies that no task knows of (the gateway restarted mid-mission, or
+        another host started it): a task follows it, so its progress is reported and pause, recovery,
+        return home and stop act on it. The wayline runner claims it (:meth:`OsdkWayline.claim`)."""
+        task = Task("adopted", "", points=0, started=True, adopted=True)
+        task.reached = (self.fc.target or 0) - 1
+        self.mission = task
+        self._disagree_since = None
+        log.warning(
+            "aircraft %s: the flight controller is flying a waypoint mission the gateway did not start "
+            "in this process (target waypoint %s): following it",
+            self.info.sn,
+            self.fc.target,
+        )
+        self._notify("mission_adopted", "a waypoint mission was running on the flight controller", "")
+
+    def _safety_check(self, now: float) -> None:
+        """After every (re)activation: an aircraft in the air under SDK control that nothing here drives
+        (the gateway restarted, or the link came back, mid live control) is stopped: zero velocity with the
+        stable bit, the emergency brake where the firmware has it, zero again. The FC may hold the last
+        set-point without limit (what a real A3/N3 does is not documented), so nothing else would stop it.
+        A mission or the FC's own automatic task is left to fly (it is adopted and reported instead)."""
+        t = self.telemetry
+        sdk = self.control_device == CONTROL_DEVICE_SDK
+        if sdk:
+            self.has_control = True  # the FC says so, whatever this process believed
+        if not (self.in_air and sdk):
+            return
+        if now - self.driven_at < 1.0:
+            return  # live control streams set-points: it governs the motion
+        if self.fc.running(t.display_mode, now) or (t.display_mode in AUTOMATIC):
+            return
+        speed = math.hypot(*t.velocity[:2]) if t.velocity is not None else float("nan")
+        self.safety_stops += 1
+        self.send_movement(0.0, 0.0, 0.0, 0.0)
+        self.emergency_stop()
+        self._stop_requested = None  # no task to end: the stop is the whole story
+        log.warning(
+            "aircraft %s: found in the air under SDK control with nothing driving it (horizontal speed "
+            "%.1f m/s, display mode %s): stopped it (zero velocity, brake)",
+            self.info.sn,
+            speed,
+            t.display_mode,
+        )
+        self._notify(
+            "stopped",
+            f"in the air under SDK control with nothing driving it (horizontal speed {speed:.1f} m/s)",
+            "",
+        )
+
+    def _notify(self, action: str, reason: str, task_id: str) -> None:
+        if self._sink is not None:
+            data = {"action": action, "reason": reason[:300], "task_id": task_id}
+            self._sink.event(self.info.sn, "x_osdk_safety_notify", data, need_reply=False)
 
     def _on_went_silent(self, now: float) -> None:
         # a silent FC may have restarted, which forgets the activation: redo it on the next pass
@@ -350,6 +539,7 @@ class AircraftAdapter(SupervisedAdapter):
             self.activation_error = None
             await self.command("set_broadcast_frequency", {"frequency": self._broadcast_codes()})
             self.activated = True
+            self._safety_check_due = True
             log.info("aircraft %s activated (firmware %s)", self.info.sn, self.version or "?")
         except (DeviceTimeout, DeviceNotConnected) as exc:
             log.info("aircraft %s: activation pending: %s", self.info.sn, exc)
@@ -499,7 +689,18 @@ class AircraftAdapter(SupervisedAdapter):
         status = f.get("status")
         if status is not None:
             t.flight = int(status["flight"])
-            t.display_mode = int(status.get("display_mode", 0))
+            if "display_mode" in status:
+                t.display_mode = int(status["display_mode"])
+            else:  # an M100 reports no display mode: its flight status names take-off (2) and landing (4)
+                t.display_mode = _M100_DISPLAY.get(t.flight)
+        device = f.get("control_device")
+        if device is not None:
+            controller = int(device.get("device_status", 0))
+            if controller != self.control_device:
+                # who controls the FC comes from the FC; read on every change (an obtain's ACK sets it
+                # between the 1 Hz reports, and an unchanged report does not undo that)
+                self.control_device = controller
+                self.has_control = controller == CONTROL_DEVICE_SDK
         if t.flight is not None and not self.in_air and t.latitude is not None and t.longitude is not None:
             self.home_position = (t.latitude, t.longitude)
         battery = f.get("battery")
@@ -512,6 +713,7 @@ class AircraftAdapter(SupervisedAdapter):
             self._set_online(True)
 
     def _on_status(self, f: Mapping[str, Any]) -> None:
+        self.fc.on_status(f, self._now())
         task = self.mission
         if task is None or f.get("mission_type") != 1:
             return
@@ -540,20 +742,23 @@ class AircraftAdapter(SupervisedAdapter):
     def _on_lost_authority(self, f: Mapping[str, Any]) -> None:
         log.warning("aircraft %s: the RC took control back (reason %s)", self.info.sn, f.get("reason"))
         self.has_control = False
+        self._stop_requested = "the RC took control back"  # the FC drops its mission and hovers
         if self._sink is not None:
             self._sink.authority_lost(self.info.sn)
             self._sink.event(self.info.sn, "joystick_invalid_notify", {"reason": 4}, need_reply=True)
 
     # -- telemetry out ----------------------------------------------------------------------------
     def mode_code(self) -> int:
+        """The Cloud API mode_code from what the FC reports (adapters/osdk/mission.py's table)."""
         t = self.telemetry
-        if t.flight is None:
-            return 14  # not connected
-        if t.flight not in self.codes.in_air:
-            return 0  # standby
-        if self.mission is not None and not self.mission.finished:
-            return 5  # wayline
-        return {11: 4, 12: 10, 15: 9, 33: 11, 17: 16}.get(t.display_mode or 0, 3)
+        task = self.mission
+        return compute_mode_code(
+            connected=t.flight is not None,
+            in_air=self.in_air,
+            display_mode=t.display_mode,
+            mission_running=self.fc_mission_running(),
+            mission_kind=task.kind if task is not None and task.live else None,
+        )
 
     def aircraft_pose(self) -> AircraftPose | None:
         t = self.telemetry
@@ -736,6 +941,11 @@ class AircraftAdapter(SupervisedAdapter):
         last = task.points - 1 - task.offset
         if task.failed is not None:
             self._progress(task, "wayline_failed", task.reached - task.offset, task.failed)
+        elif task.dropped is not None:
+            # the FC ended it: an emergency stop the operator asked for is a cancel; anything else failed
+            status = "wayline_cancel" if task.dropped == "emergency stop" else "wayline_failed"
+            result = 0 if status == "wayline_cancel" else ResultCode.BUSY
+            self._progress(task, status, task.reached - task.offset, result)
         elif task.finished:
             self._progress(task, "wayline_ok", last)
             if task.kind == "takeoff":
@@ -767,16 +977,24 @@ class AircraftAdapter(SupervisedAdapter):
         task.planned = [
             {"latitude": p.latitude, "longitude": p.longitude, "height": p.height} for p in data.points
         ]
-        self.mission = task
+        self.begin_mission(task)
         await self.ground_station("wp_start_stop", {"start": 0})
+        self.mission_started(task)
         self._start_watch(task)
         return CallResult()
 
     async def _fly_to_point_stop(self, data: FlyToPointStop) -> CallResult:
         self._require_online()
-        await self.ground_station("wp_start_stop", {"start": 1})
+        try:
+            await self.ground_station("wp_start_stop", {"start": 1})
+        except DeviceRejected as exc:
+            # 0xD4 "mission not running": the FC flies nothing, so the stop has nothing left to do but
+            # end the task (the device is the truth); any other refusal is the answer
+            if exc.detail.get("ack") != MISSION_NOT_RUNNING:
+                raise
+        self.mission_stopped()
         task = self.mission
-        if task is not None and not task.finished:
+        if task is not None and task.live:
             task.finished = True  # no wayline_ok for a cancelled task
             if self._mission_task is not None:
                 self._mission_task.cancel()
@@ -893,7 +1111,7 @@ class AircraftAdapter(SupervisedAdapter):
             await self._set_go_home_altitude(int(data.rth_altitude))
         await self.flight_task("takeoff")
         task = Task("takeoff", data.flight_id, 2)
-        self.mission = task
+        self.begin_mission(task)
         self._progress(task, "task_ready", 0)
         if self._mission_task is not None and not self._mission_task.done():
             self._mission_task.cancel()
@@ -916,6 +1134,7 @@ class AircraftAdapter(SupervisedAdapter):
             # 0 or absent → 1 continue (the seed's default)
             await self._upload(points, data.max_speed, exit_on_rc_lost=self._exit_on_rc_lost(data))
             await self.ground_station("wp_start_stop", {"start": 0})
+            self.mission_started(task)
         except DeviceRejected as exc:
             self._progress(task, "wayline_failed", 0, exc.result)
             return

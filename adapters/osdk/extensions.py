@@ -8,15 +8,15 @@ degrees to the wire's radians.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import Field
 
 from schemas.base import Bool, Float, InboundModel, Int, Latitude, Longitude, OutboundModel
-from schemas.envelope import EmptyRequest, ErrorOutput, ResultReply
+from schemas.envelope import EmptyRequest, ErrorOutput, InboundResult, ResultReply
 from schemas.results import ResultValue
 
-__all__ = ["EXTENSIONS"]
+__all__ = ["EVENT_EXTENSIONS", "EXTENSIONS", "SafetyNotify"]
 
 
 class Pause(InboundModel):
@@ -168,4 +168,21 @@ EXTENSIONS: tuple[tuple[str, type[InboundModel], type[OutboundModel], str], ...]
     ("x_osdk_land", EmptyRequest, ResultReply, "OSDK: land now (0x01 0x01 task 2)"),
     ("x_osdk_go_home", EmptyRequest, ResultReply, "OSDK: return to home (0x01 0x01 task 6)"),
     ("x_osdk_authority_release", EmptyRequest, ResultReply, "OSDK: release SDK control (0x01 0x00 0)"),
+)
+
+
+class SafetyNotify(OutboundModel):
+    """What the gateway found the flight controller doing, against what it believed, and what it did:
+    ``stopped`` (in the air under SDK control with nothing driving it, after a restart or a reconnect:
+    zero velocity and the brake were sent), ``mission_adopted`` (a waypoint mission was flying that this
+    process had not started: it is followed and reported), ``mission_ended`` (the flight controller ended
+    a task's mission: an emergency stop, the RC taking over, a mission it dropped)."""
+
+    action: Literal["stopped", "mission_adopted", "mission_ended"] = Field(description="What happened.")
+    reason: str = Field(max_length=300, description="What the flight controller reported, in words.")
+    task_id: str = Field(max_length=64, description="The task's flight_id or fly_to_id; empty if none.")
+
+
+EVENT_EXTENSIONS: tuple[tuple[str, type[OutboundModel], type[InboundModel], str], ...] = (
+    ("x_osdk_safety_notify", SafetyNotify, InboundResult, "OSDK: the flight controller's truth won"),
 )

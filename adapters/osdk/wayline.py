@@ -3,9 +3,16 @@ upload and start each chained ground-station mission, follow its reached / finis
 change the cruise speed per segment, pause / resume / cancel, and the gateway's own return home.
 
 Owns the I/O half of a wayline on this family (the plan, sans-I/O, is ``wayline_plan.py``); uses the
-adapter's public command path (``ground_station``, ``obtain_control``, ``flight_task``) and its mission
-pushes (``Task``). Knows nothing of MQTT, downloads or Cloud API task states: it reports through the
+aircraft only through :class:`adapters.osdk.mission.MissionHost` (the command path ``ground_station``,
+``obtain_control``, ``flight_task``; ``begin_mission``/``mission_started`` for the :class:`Task` its
+pushes go to). Knows nothing of MQTT, downloads or Cloud API task states: it reports through the
 callbacks it is given.
+
+The FC decides when a mission is over: a task the FC stopped flying (an emergency brake, the RC taking
+over, a mission it dropped) ends the run with :class:`MissionStopped` (an emergency stop the operator
+asked for) or :class:`DeviceRejected` (anything else), with the FC's reason; a waypoint mission found
+flying after a restart is handed to the wayline service by :meth:`OsdkWayline.claim` and followed by
+:meth:`OsdkWayline.follow`.
 """
 
 from __future__ import annotations
@@ -14,16 +21,13 @@ import asyncio
 import logging
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 from adapters.errors import DeviceNotConnected, DeviceRejected, DeviceTimeout, MissionStopped
+from adapters.osdk.mission import MissionHost, Task, distance_m
 from adapters.osdk.wayline_plan import MISSION_MAX, FcMission, Plan, PlanOptions, plan_route
 from adapters.wayline.kmz import Route
 from adapters.wayline.runner import Reached
 from schemas.results import ResultCode
-
-if TYPE_CHECKING:
-    from adapters.osdk.adapter import AircraftAdapter, Task
 
 log = logging.getLogger(__name__)
 
@@ -31,13 +35,16 @@ __all__ = ["MissionStopped", "OsdkWayline", "Reached"]
 
 AUTO_TAKEOFF = 11
 POLL = 0.05
+MISSION_NOT_RUNNING = 0xD4  # ground-station ACK: no mission is running
+#: closer than this (m) to home, the gateway's two-waypoint way home cannot be flown: the FC's go home is
+MIN_HOME_DISTANCE = 2.0
 
 
 class OsdkWayline:
     """The wayline runner (:class:`adapters.wayline.runner.WaylineRunner`) of one
     :class:`~adapters.osdk.adapter.AircraftAdapter` (one route at a time)."""
 
-    def __init__(self, adapter: AircraftAdapter) -> None:
+    def __init__(self, adapter: MissionHost) -> None:
         self.adapter = adapter
         self.paused = False
         self._task: Task | None = None
@@ -92,11 +99,11 @@ class OsdkWayline:
         if a.in_air:
             return
         await a.flight_task("takeoff")
-        deadline = a._now() + timeout
+        deadline = a.clock.monotonic() + timeout
         while not self._took_off():
-            if a._now() > deadline:
+            if a.clock.monotonic() > deadline:
                 raise DeviceTimeout("the aircraft did not take off in time")
-            await a._clock.sleep(POLL)
+            await a.clock.sleep(POLL)
 
     def _took_off(self) -> bool:
         """Airborne, at least 1 m up, and the FC's own take-off over (display mode no longer 11)."""
@@ -113,13 +120,11 @@ class OsdkWayline:
         """Fly every mission of ``plan`` in order; returns when the last one finished. Raises
         DeviceRejected (FC refused or reported a mission error, ``result``), DeviceTimeout, or
         MissionStopped."""
-        from adapters.osdk.adapter import Task
-
         for k, mission in enumerate(plan.missions):
             await self._upload(mission)
             task = Task("wayline", flight_id, len(mission.waypoints))
             self._task = task
-            self.adapter.mission = task
+            self.adapter.begin_mission(task)
             speed = [float(mission.init["idle_vel"])]
 
             def reached(index: int, mission: FcMission = mission, speed: list[float] = speed) -> None:
@@ -137,18 +142,42 @@ class OsdkWayline:
 
             task.on_reached = reached
             await self.adapter.ground_station("wp_start_stop", {"start": 0})
+            self.adapter.mission_started(task)
             if k == 0:
                 on_entered()
-            while not (task.finished or task.failed is not None):
-                if not self.adapter.online:
-                    # the FC flies its uploaded mission on its own (a ground-station mission needs no
-                    # host), but nothing it does can be reported or changed any more: the task fails
-                    raise DeviceNotConnected(f"aircraft {self.adapter.info.sn} lost during the mission")
-                await self.adapter._clock.sleep(POLL)
-            if task.failed is not None:
-                raise DeviceRejected(task.failed, "the flight controller reported a mission error")
+            await self._until_over(task)
             if task.reached < len(mission.waypoints) - 1:
                 raise MissionStopped("the mission was stopped")
+
+    async def _until_over(self, task: Task) -> None:
+        """Wait until the FC has finished ``task``'s mission; raise how it ended otherwise."""
+        while task.live:
+            if not self.adapter.online:
+                # the FC flies its uploaded mission on its own (a ground-station mission needs no
+                # host), but nothing it does can be reported or changed any more: the task fails
+                raise DeviceNotConnected(f"aircraft {self.adapter.info.sn} lost during the mission")
+            await self.adapter.clock.sleep(POLL)
+        if task.failed is not None:
+            raise DeviceRejected(task.failed, "the flight controller reported a mission error")
+        if task.dropped is not None:
+            if task.dropped == "emergency stop":
+                raise MissionStopped("emergency stop: the flight controller braked and dropped the mission")
+            raise DeviceRejected(ResultCode.BUSY, f"the flight controller ended the mission: {task.dropped}")
+
+    # -- a mission found flying (after a restart) -------------------------------------------------
+    def claim(self) -> Task | None:
+        """The waypoint mission the FC flies that no run follows (the adapter adopted it), once."""
+        task = self.adapter.current_mission
+        if task is None or not task.adopted or not task.live or task is self._task:
+            return None
+        self._task = task
+        return task
+
+    async def follow(self, task: Task, on_reached: Callable[[int], None]) -> None:
+        """Follow an adopted mission to its end: ``on_reached`` with each waypoint index the FC reports;
+        returns when the FC finished it, raises like :meth:`fly` otherwise."""
+        task.on_reached = on_reached
+        await self._until_over(task)
 
     async def _set_speed(self, speed: float) -> None:
         try:
@@ -175,25 +204,48 @@ class OsdkWayline:
         self.paused = False
 
     async def cancel(self) -> None:
-        """Stop the mission: the FC brakes and hovers where it is."""
+        """Stop the mission: the FC brakes and hovers where it is. A FC that flies none (0xD4) has
+        nothing left to stop: the task ends all the same."""
         task = self._task
-        if task is not None and not task.finished:
+        if task is not None and task.live:
             task.finished = True
-        await self.adapter.ground_station("wp_start_stop", {"start": 1})
+        if task is not None and task.kind == "go_home":
+            await self.adapter.flight_task("exit_go_home")  # the FC hovers where it is
+            return
+        try:
+            await self.adapter.ground_station("wp_start_stop", {"start": 1})
+        except DeviceRejected as exc:
+            if exc.detail.get("ack") != MISSION_NOT_RUNNING:
+                raise
+        self.adapter.mission_stopped()
 
-    def return_home_plan(self, rth_altitude: float) -> list[tuple[float, float, float]]:
+    def return_home_plan(self, rth_altitude: float) -> list[tuple[float, float, float]] | None:
         """The way home the gateway flies: up to ``rth_altitude`` over the aircraft, over home at that
-        height (then the FC lands): (latitude, longitude, height above take-off)."""
+        height (then the FC lands): (latitude, longitude, height above take-off). None when the gateway
+        cannot build one: it does not know where home is (it has not seen this aircraft on the ground: a
+        restarted gateway), or home is too close for a two-waypoint mission (the FC refuses neighbours
+        closer than 0.5 m, 0xE5); the FC's own go home is flown then (:meth:`go_home`): it knows home."""
         t = self.adapter.telemetry
-        here = (t.latitude or 0.0, t.longitude or 0.0)
+        home = self.adapter.home_position
+        if home is None or t.latitude is None or t.longitude is None:
+            return None
+        here = (t.latitude, t.longitude)
         h = max(rth_altitude, t.height or 0.0)
-        home = self.home()
+        if distance_m(here, home) < MIN_HOME_DISTANCE:
+            return None
         return [(here[0], here[1], h), (home[0], home[1], h)]
+
+    async def go_home(self, flight_id: str) -> None:
+        """The FC's own go home (``01 01`` task 6: it climbs to its go-home altitude, flies home and
+        lands), followed as a task of kind ``go_home`` (the FC's display mode says it runs)."""
+        task = Task("go_home", flight_id, 0)
+        self._task = task
+        self.adapter.begin_mission(task)
+        await self.adapter.flight_task("go_home")
+        self.adapter.mission_started(task)
 
     async def return_home(self, path: list[tuple[float, float, float]], speed: float, flight_id: str) -> None:
         """Fly ``path`` as a mission that lands at its end (action_on_finish 2); returns once started."""
-        from adapters.osdk.adapter import Task
-
         a = self.adapter
         init = {
             "length": len(path),
@@ -211,12 +263,13 @@ class OsdkWayline:
             wp = {"index": i, "latitude": math.radians(lat), "longitude": math.radians(lon), "altitude": alt,
                   "action_time_limit": 100}  # fmt: skip
             await a.ground_station("wp_upload", wp)
-        task = Task("wayline", flight_id, len(path))
+        task = Task("return_home", flight_id, len(path))
         self._task = task
-        a.mission = task
+        a.begin_mission(task)
         await a.ground_station("wp_start_stop", {"start": 0})
+        a.mission_started(task)
 
     @property
     def mission_running(self) -> bool:
         task = self._task
-        return task is not None and not task.finished and task.failed is None
+        return task is not None and task.live

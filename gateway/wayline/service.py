@@ -35,6 +35,14 @@ Choices where WAYLINE-NOTES is silent (a DJI dock's behaviour where known):
   314008 "preparation timed out".
 * ``wayline_precision_type``, ``rth_mode``, ``flight_safety_advance_check`` and ``simulate_mission`` have no
   counterpart on the FC: accepted and logged as ignored (``rth_mode`` 1 preset height is what is flown).
+* **The aircraft is the truth.** A run ends when the FC says its mission ended: an emergency stop the
+  operator asked for ends it ``canceled``, any other end the FC decides (the RC taking over, a mission it
+  dropped) ``failed`` with the FC's reason, each with a break point; a new prepare and execute are then
+  accepted. Each running task is kept in the crash-safe store (``gateway/store.py``): a gateway restarted
+  while the aircraft flies the mission finds it flying (the adapter adopts it), reports it again under the
+  same ``flight_id`` with its progress, and pause, recovery, return home and its end act on it. A mission
+  the store does not know is reported as a task of its own (``flight_id`` ``adopted-<sn>-<ms>``). After
+  a restart the waypoint indexes are the FC mission's (the plan that mapped them is not kept).
 """
 
 from __future__ import annotations
@@ -60,6 +68,7 @@ from gateway.clock import Clock
 from gateway.cloud_requests import CloudRequestError, CloudRequests
 from gateway.devices import DeviceTable
 from gateway.metrics import Metrics
+from gateway.store import StateStore
 from gateway.wayline.fetch import FetchError, fetch_kmz
 from gateway.wayline.task import (
     NO_WAYLINE,
@@ -128,6 +137,7 @@ class WaylineService:
         metrics: Metrics,
         require_authority: bool,
         fetch: Callable[[str], Awaitable[bytes]] = fetch_kmz,
+        store: StateStore | None = None,
     ) -> None:
         self.gateway_sn = gateway_sn
         self.devices = devices
@@ -145,6 +155,8 @@ class WaylineService:
         self._rth: dict[str, Any] | None = None  # the way home being flown: path, flight_id
         self._flown: dict[str, _File] = {}  # the file each run flies (a fresh URL may replace the prepared)
         self._last_rth_altitude = DEFAULT_RTH_ALTITUDE
+        self.store = store if store is not None else StateStore(None)
+        self._persisted: dict[str, tuple[Any, ...]] = {}  # flight_id -> what the store holds of it
 
     # -- the aircraft ----------------------------------------------------------------------------
     def _aircraft(self) -> Any:
@@ -322,9 +334,13 @@ class WaylineService:
         runner = aircraft.wayline
         path = runner.return_home_plan(self._last_rth_altitude)
         try:
-            await runner.return_home(path, RTH_SPEED, flight_id or "return-home")
+            if path is None:  # home unknown here or too close for a mission: the FC's own go home
+                await runner.go_home(flight_id or "return-home")
+            else:
+                await runner.return_home(path, RTH_SPEED, flight_id or "return-home")
         except (DeviceRejected, DeviceTimeout, DeviceNotConnected) as exc:
             return ResultCode.BUSY, {"reason": f"return home refused: {str(exc)[:200]}"}
+        path = path or []
         self._rth = {"path": path, "flight_id": flight_id, "home_altitude": aircraft.telemetry.home_altitude}
         self._emit_rth()
         return ResultCode.SUCCESS, None
@@ -342,45 +358,75 @@ class WaylineService:
 
     # -- a run -----------------------------------------------------------------------------------
     async def _run(self, aircraft: Any, task: WaylineTask) -> None:
-        book, runner, req = self.book, aircraft.wayline, task.request
+        req = task.request
         if req.rth_altitude is not None:
             self._last_rth_altitude = float(req.rth_altitude)
-        try:
-            book.step(task, STEP_URL, 2)
-            self._emit(task)
-            file = self._flown[task.flight_id] = await self._fresh_file(aircraft, task)
-            if file.route.config.global_rth_height and req.rth_altitude is None:
-                self._last_rth_altitude = file.route.config.global_rth_height
-            plan = self._plan(aircraft, file.route, req)
-            for note in plan.skipped:
-                log.warning("wayline task %s: skipped %s", task.flight_id, note)
-            book.planned(task, plan.route_points)
-            book.step(task, STEP_UPLOAD, 8)
-            self._emit(task)
-            await runner.ensure_control()
-            if not aircraft.in_air:
-                book.step(task, STEP_TAKEOFF, 9)
-                self._emit(task)
-                try:
-                    await runner.take_off(TAKEOFF_TIMEOUT)
-                except DeviceTimeout as exc:  # a dock's "preparation timed out"
-                    raise DeviceRejected(ResultCode.WAYLINE_PREPARE_TIMEOUT, str(exc)) from None
-            book.step(task, STEP_TRIGGER, 10)
+        self.store.task_started(
+            task.flight_id, aircraft.info.sn, req.model_dump(mode="json"), self.clock.time_ms()
+        )
+        await self._guarded(aircraft, task, self._fly(aircraft, task))
+
+    async def _follow(self, aircraft: Any, task: WaylineTask, mission: Any) -> None:
+        """An adopted mission, followed to its end (the FC flies it; the runner reports it)."""
+
+        def reached(index: int) -> None:
+            if task.phase is Phase.DONE:
+                return
+            wayline_id = 0 if task.wayline_id == NO_WAYLINE else task.wayline_id
+            self.book.reached(task, wayline_id, index, 0)
             self._emit(task)
 
-            def reached(r: Reached) -> None:
-                if task.phase is Phase.DONE:
-                    return
-                book.reached(task, r.ref[0], r.ref[1], r.photos)
-                self._emit(task)
-
-            def entered() -> None:
-                book.entered(task)
-                self._emit(task)
-
-            await runner.fly(plan, task.flight_id, reached, entered)
+        async def follow() -> None:
+            await aircraft.wayline.follow(mission, reached)
             if task.phase is not Phase.DONE:
-                book.finished(task)
+                self.book.finished(task)
+
+        await self._guarded(aircraft, task, follow())
+
+    async def _fly(self, aircraft: Any, task: WaylineTask) -> None:
+        """A run: URL, download, plan, upload, take-off, the missions; its ends are :meth:`_guarded`'s."""
+        book, runner, req = self.book, aircraft.wayline, task.request
+        book.step(task, STEP_URL, 2)
+        self._emit(task)
+        file = self._flown[task.flight_id] = await self._fresh_file(aircraft, task)
+        if file.route.config.global_rth_height and req.rth_altitude is None:
+            self._last_rth_altitude = file.route.config.global_rth_height
+        plan = self._plan(aircraft, file.route, req)
+        for note in plan.skipped:
+            log.warning("wayline task %s: skipped %s", task.flight_id, note)
+        book.planned(task, plan.route_points)
+        book.step(task, STEP_UPLOAD, 8)
+        self._emit(task)
+        await runner.ensure_control()
+        if not aircraft.in_air:
+            book.step(task, STEP_TAKEOFF, 9)
+            self._emit(task)
+            try:
+                await runner.take_off(TAKEOFF_TIMEOUT)
+            except DeviceTimeout as exc:  # a dock's "preparation timed out"
+                raise DeviceRejected(ResultCode.WAYLINE_PREPARE_TIMEOUT, str(exc)) from None
+        book.step(task, STEP_TRIGGER, 10)
+        self._emit(task)
+
+        def reached(r: Reached) -> None:
+            if task.phase is Phase.DONE:
+                return
+            book.reached(task, r.ref[0], r.ref[1], r.photos)
+            self._emit(task)
+
+        def entered() -> None:
+            book.entered(task)
+            self._emit(task)
+
+        await runner.fly(plan, task.flight_id, reached, entered)
+        if task.phase is not Phase.DONE:
+            book.finished(task)
+
+    async def _guarded(self, aircraft: Any, task: WaylineTask, body: Awaitable[None]) -> None:
+        """Run ``body`` (a run or a follow) and end the task the way it ended, reported and stored."""
+        book = self.book
+        try:
+            await body
         except (KmzError, RouteRefused) as exc:
             code, reason = _failure(exc)
             br = getattr(exc, "break_reason", 0)
@@ -486,16 +532,84 @@ class WaylineService:
                 return [(pm.latitude, pm.longitude) for pm in ordered]
         return None
 
+    # -- a mission found flying (a restart mid-flight) ---------------------------------------------
+    def _adopt(self, aircraft: Any, mission: Any) -> None:
+        """The aircraft flies a waypoint mission no run follows (its adapter adopted it): report it as the
+        task the store says was running (same ``flight_id``, its progress so far), else as a task of its
+        own, and follow it to its end."""
+        sn = aircraft.info.sn
+        stored = self.store.live_task(sn)
+        request: Any = None
+        if stored is not None:
+            flight_id = stored.flight_id
+            try:
+                request = FlighttaskPrepare.model_validate(stored.request)
+            except ValueError:
+                log.warning("wayline task %s: its stored request no longer validates", flight_id)
+        else:
+            flight_id = f"adopted-{sn}-{self.clock.time_ms()}"
+        mission.task_id = flight_id
+        task = self.book.adopt(
+            flight_id,
+            request,
+            self.clock.monotonic(),
+            paused=stored is not None and stored.status == "paused",
+            total_points=stored.total_points if stored is not None else 0,
+            done_points=stored.done_points if stored is not None else 0,
+            wayline_id=stored.wayline_id if stored is not None else 0,
+            waypoint_index=stored.waypoint_index if stored is not None else 0,
+        )
+        if stored is None:
+            self.store.task_started(flight_id, sn, {}, self.clock.time_ms())
+        log.warning(
+            "wayline task %s: aircraft %s is flying it (found after a restart): reporting and following it",
+            flight_id,
+            sn,
+        )
+        self._emit(task)
+        self._runs[flight_id] = asyncio.get_running_loop().create_task(
+            self._follow(aircraft, task, mission), name=f"wayline-follow-{flight_id}"
+        )
+
     # -- reports ---------------------------------------------------------------------------------
     def _emit(self, task: WaylineTask) -> None:
         self._event(
             self.gateway_sn, "flighttask_progress", self.book.progress(task), True, bid=task.flight_id
         )
+        self._persist(task)
+
+    def _persist(self, task: WaylineTask) -> None:
+        """Keep what a restarted gateway needs of a started task (written when it changes)."""
+        if task.started_at is None:
+            return
+        live = task.phase in (Phase.RUNNING, Phase.PAUSED)
+        row = (task.status, task.total_points, task.done_points, task.wayline_id, task.waypoint_index, live)
+        if self._persisted.get(task.flight_id) == row:
+            return
+        try:
+            self.store.task_progress(
+                task.flight_id,
+                status=task.status,
+                total_points=task.total_points,
+                done_points=task.done_points,
+                wayline_id=task.wayline_id,
+                waypoint_index=task.waypoint_index,
+                live=live,
+                now_ms=self.clock.time_ms(),
+            )
+        except Exception:  # a full disk must not stop a flight's reports
+            self.metrics.inc("handler_exceptions_total", where="state_store")
+            log.exception("wayline task %s: could not keep its state", task.flight_id)
+            return
+        if live:
+            self._persisted[task.flight_id] = row
+        else:
+            self._persisted.pop(task.flight_id, None)
 
     def _emit_rth(self) -> None:
         rth = self._rth
-        if rth is None:
-            return
+        if rth is None or not rth["path"]:
+            return  # the FC's own go home: its path is the FC's
         base = rth["home_altitude"] or 0.0
         points = [
             {"latitude": lat, "longitude": lon, "height": round(base + h, 1)} for lat, lon, h in rth["path"]
@@ -506,10 +620,15 @@ class WaylineService:
     def tick(self) -> None:
         """Once a second: progress of the running task, the way home, time-outs, conditional tasks."""
         now = self.clock.monotonic()
+        aircraft = self._aircraft()
+        claim = getattr(getattr(aircraft, "wayline", None), "claim", None)
+        if claim is not None:
+            mission = claim()
+            if mission is not None:
+                self._adopt(aircraft, mission)
         task = self.book.active
         if task is not None:
             self._emit(task)
-        aircraft = self._aircraft()
         if self._rth is not None:
             if aircraft is not None and aircraft.wayline.mission_running:
                 self._emit_rth()

@@ -161,6 +161,33 @@ class TaskBook:
         task.step = STEP_URL
         return Verdict(), True
 
+    def adopt(
+        self,
+        flight_id: str,
+        request: Any,
+        now: float,
+        *,
+        paused: bool = False,
+        total_points: int = 0,
+        done_points: int = 0,
+        wayline_id: int = NO_WAYLINE,
+        waypoint_index: int = 0,
+    ) -> WaylineTask:
+        """A task the aircraft is found flying (a restarted gateway): running (or paused) and entered, with
+        the progress known of it; ``request`` may be None (a mission nobody here started)."""
+        task = self.tasks.get(flight_id) or WaylineTask(flight_id, now, request)
+        self.tasks[flight_id] = task
+        task.started_at = now if task.started_at is None else task.started_at
+        task.total_points, task.done_points = total_points, done_points
+        task.wayline_id, task.waypoint_index = wayline_id, waypoint_index
+        task.phase = Phase.RUNNING
+        self.entered(task)
+        if total_points:
+            task.percent = min(99, 10 + 90 * done_points // total_points)
+        if paused:
+            self.paused(task)
+        return task
+
     def undo(self, flight_ids: list[str]) -> Verdict:
         live = (Phase.RUNNING, Phase.PAUSED)
         running = [f for f in flight_ids if (t := self.tasks.get(f)) is not None and t.phase in live]

@@ -1,0 +1,151 @@
+"""The gateway's one crash-safe store: what must outlive the process (the wayline tasks in flight, so a
+restarted gateway reports the mission the aircraft still flies under the same ``flight_id``).
+
+Owns one SQLite database (the standard library's ``sqlite3``) in the configured state directory
+(``state_dir``; ``dji-gateway run --simulate`` without one uses a temporary directory, and no directory at
+all keeps the store in memory, with a warning). Every write is one transaction in WAL mode with
+``synchronous=FULL``: a process killed at any instant leaves either the state before a write or the
+state after it. Nothing else of the gateway writes to disk.
+
+Must not know MQTT, devices or the wayline task book: rows in, rows out, as plain values. Called on the
+event loop only (one connection, never shared across threads); each write is a few hundred
+microseconds on a local disk, once per task start, waypoint and end.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sqlite3
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+__all__ = ["DB_NAME", "StateStore", "StoredTask"]
+
+DB_NAME = "dji-gateway.sqlite3"
+SCHEMA_VERSION = 1
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS tasks (
+    flight_id TEXT PRIMARY KEY,
+    aircraft_sn TEXT NOT NULL,
+    request TEXT NOT NULL,          -- the flighttask_prepare data, as JSON
+    status TEXT NOT NULL,           -- the last flighttask_progress status
+    total_points INTEGER NOT NULL DEFAULT 0,
+    done_points INTEGER NOT NULL DEFAULT 0,
+    wayline_id INTEGER NOT NULL DEFAULT 65535,
+    waypoint_index INTEGER NOT NULL DEFAULT 0,
+    live INTEGER NOT NULL DEFAULT 1, -- 1 while the task runs or is paused
+    updated_ms INTEGER NOT NULL
+);
+"""
+
+
+@dataclass(frozen=True, slots=True)
+class StoredTask:
+    """A wayline task as the store kept it."""
+
+    flight_id: str
+    aircraft_sn: str
+    request: dict[str, Any]
+    status: str
+    total_points: int
+    done_points: int
+    wayline_id: int
+    waypoint_index: int
+    live: bool
+    updated_ms: int
+
+
+class StateStore:
+    """The gateway's state on disk (or in memory when ``directory`` is None)."""
+
+    def __init__(self, directory: Path | None) -> None:
+        self.path: Path | None = None
+        if directory is None:
+            target = ":memory:"
+        else:
+            directory.mkdir(parents=True, exist_ok=True)
+            self.path = directory / DB_NAME
+            target = str(self.path)
+        self._db = sqlite3.connect(target, isolation_level=None, check_same_thread=False)
+        self._db.execute("PRAGMA journal_mode=WAL")
+        self._db.execute("PRAGMA synchronous=FULL")
+        self._db.executescript(_SCHEMA)  # idempotent; executescript commits on its own
+        with self._tx():
+            self._db.execute(
+                "INSERT OR IGNORE INTO meta (key, value) VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),)
+            )
+
+    def _tx(self) -> _Transaction:
+        return _Transaction(self._db)
+
+    # -- wayline tasks -----------------------------------------------------------------------------
+    def task_started(self, flight_id: str, aircraft_sn: str, request: dict[str, Any], now_ms: int) -> None:
+        with self._tx():
+            self._db.execute(
+                "INSERT INTO tasks (flight_id, aircraft_sn, request, status, live, updated_ms) "
+                "VALUES (?, ?, ?, 'sent', 1, ?) ON CONFLICT(flight_id) DO UPDATE SET "
+                "aircraft_sn=excluded.aircraft_sn, request=excluded.request, status='sent', live=1, "
+                "updated_ms=excluded.updated_ms",
+                (flight_id, aircraft_sn, json.dumps(request), now_ms),
+            )
+
+    def task_progress(
+        self,
+        flight_id: str,
+        *,
+        status: str,
+        total_points: int,
+        done_points: int,
+        wayline_id: int,
+        waypoint_index: int,
+        live: bool,
+        now_ms: int,
+    ) -> None:
+        with self._tx():
+            self._db.execute(
+                "UPDATE tasks SET status=?, total_points=?, done_points=?, wayline_id=?, waypoint_index=?, "
+                "live=?, updated_ms=? WHERE flight_id=?",
+                (status, total_points, done_points, wayline_id, waypoint_index, int(live), now_ms, flight_id),
+            )
+
+    def live_task(self, aircraft_sn: str) -> StoredTask | None:
+        """The task that was running or paused on ``aircraft_sn`` when the store last heard of it."""
+        row = self._db.execute(
+            "SELECT flight_id, aircraft_sn, request, status, total_points, done_points, wayline_id, "
+            "waypoint_index, live, updated_ms FROM tasks WHERE aircraft_sn=? AND live=1 "
+            "ORDER BY updated_ms DESC LIMIT 1",
+            (aircraft_sn,),
+        ).fetchone()
+        if row is None:
+            return None
+        return StoredTask(
+            row[0], row[1], json.loads(row[2]), row[3], row[4], row[5], row[6], row[7], bool(row[8]), row[9]
+        )
+
+    def forget_before(self, cutoff_ms: int) -> int:
+        """Drop ended tasks last changed before ``cutoff_ms`` (the store stays small)."""
+        with self._tx():
+            cur = self._db.execute("DELETE FROM tasks WHERE live=0 AND updated_ms < ?", (cutoff_ms,))
+        return cur.rowcount
+
+    def close(self) -> None:
+        self._db.close()
+
+
+class _Transaction:
+    """``BEGIN IMMEDIATE`` … ``COMMIT`` (``ROLLBACK`` on an exception): one write, whole or not at all."""
+
+    def __init__(self, db: sqlite3.Connection) -> None:
+        self._db = db
+
+    def __enter__(self) -> None:
+        self._db.execute("BEGIN IMMEDIATE")
+
+    def __exit__(self, kind: object, exc: object, tb: object) -> None:
+        self._db.execute("COMMIT" if kind is None else "ROLLBACK")

@@ -1,0 +1,84 @@
+"""The crash-safe store (gateway/store.py): what a restarted gateway reads back, and a writer killed with
+SIGKILL in the middle of its writes leaves a database that opens and holds a whole row."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from gateway.store import DB_NAME, StateStore
+
+
+def test_a_task_survives_a_new_store_on_the_same_directory(tmp_path: Path) -> None:
+    store = StateStore(tmp_path)
+    request = {"flight_id": "f-1", "task_type": 0, "file": {"url": "http://x", "fingerprint": "ab"}}
+    store.task_started("f-1", "AC-1", request, 1000)
+    store.task_progress(
+        "f-1", status="in_progress", total_points=5, done_points=2, wayline_id=0, waypoint_index=2, live=True,
+        now_ms=2000,
+    )  # fmt: skip
+    store.close()
+    again = StateStore(tmp_path)  # a new process
+    row = again.live_task("AC-1")
+    assert row is not None
+    assert (row.flight_id, row.status, row.done_points, row.total_points, row.waypoint_index) == (
+        "f-1", "in_progress", 2, 5, 2,
+    )  # fmt: skip
+    assert row.request == request
+    assert again.live_task("AC-2") is None
+    again.task_progress(
+        "f-1", status="ok", total_points=5, done_points=5, wayline_id=0, waypoint_index=5, live=False,
+        now_ms=3000,
+    )  # fmt: skip
+    assert again.live_task("AC-1") is None  # ended: nothing to adopt
+    assert again.forget_before(4000) == 1
+    assert (tmp_path / DB_NAME).exists()
+    again.close()
+
+
+def test_the_newest_live_task_wins_and_a_memory_store_writes_nothing(tmp_path: Path) -> None:
+    store = StateStore(None)
+    store.task_started("old", "AC-1", {}, 1000)
+    store.task_started("new", "AC-1", {}, 2000)
+    row = store.live_task("AC-1")
+    assert row is not None and row.flight_id == "new"
+    assert store.path is None and not list(tmp_path.iterdir())
+    store.close()
+
+
+_WRITER = """
+import sys
+from pathlib import Path
+from gateway.store import StateStore
+store = StateStore(Path(sys.argv[1]))
+store.task_started("f", "AC", {"n": 0}, 1)
+print("ready", flush=True)
+n = 0
+while True:
+    n += 1
+    store.task_progress("f", status="in_progress", total_points=n, done_points=n, wayline_id=0,
+                        waypoint_index=n, live=True, now_ms=n)
+"""
+
+
+def test_a_writer_killed_mid_write_leaves_a_whole_row(tmp_path: Path) -> None:
+    proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+        time.sleep(0.3)  # hundreds of committed writes, one in progress
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(5)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(5)
+        if proc.stdout is not None:
+            proc.stdout.close()
+    store = StateStore(tmp_path)
+    row = store.live_task("AC")
+    store.close()
+    assert row is not None
+    assert row.total_points == row.done_points == row.waypoint_index == row.updated_ms > 0
