@@ -285,7 +285,10 @@ class AircraftAdapter(SupervisedAdapter):
         return self.telemetry.flight in self.codes.in_air
 
     def _task_fields(self, task: str) -> dict[str, Any]:
-        fields: dict[str, Any] = {"command": self.codes.tasks[task]}
+        code = self.codes.tasks.get(task)
+        if code is None:  # e.g. exit go home on an M100: its legacy flight tasks have none
+            raise DeviceRejected(ResultCode.BUSY, f"flight task {task} does not exist on {self.fw} firmware")
+        fields: dict[str, Any] = {"command": code}
         if self.fw == "m100":
             self._task_seq = (self._task_seq + 1) & 0xFF
             fields["cmd_sequence"] = self._task_seq
@@ -370,6 +373,21 @@ class AircraftAdapter(SupervisedAdapter):
     def mission_started(self, task: Task) -> None:
         """The FC acknowledged the start of ``task``'s mission: from now on it may disagree."""
         task.started = True
+
+    async def start_mission(self, task: Task) -> None:
+        """``03 12`` start for the uploaded mission ``task`` stands for; a start the FC refuses (or does not
+        answer) ends the task with that result, so no task is left waiting for a mission that never ran."""
+        try:
+            await self.ground_station("wp_start_stop", {"start": 0})
+        except DeviceRejected as exc:
+            task.failed = int(exc.result)
+            task.done.set()
+            raise
+        except (DeviceTimeout, DeviceNotConnected):
+            task.failed = int(ResultCode.DEVICE_TIMEOUT)
+            task.done.set()
+            raise
+        self.mission_started(task)
 
     def mission_stopped(self) -> None:
         """The FC acknowledged a stop (or said no mission runs): its last status push no longer holds."""
@@ -978,8 +996,7 @@ class AircraftAdapter(SupervisedAdapter):
             {"latitude": p.latitude, "longitude": p.longitude, "height": p.height} for p in data.points
         ]
         self.begin_mission(task)
-        await self.ground_station("wp_start_stop", {"start": 0})
-        self.mission_started(task)
+        await self.start_mission(task)
         self._start_watch(task)
         return CallResult()
 
@@ -1133,8 +1150,7 @@ class AircraftAdapter(SupervisedAdapter):
             # exit_wayline_when_rc_lost / commander_mode_lost_action: 1 exit → init action_on_rc_lost 0;
             # 0 or absent → 1 continue (the seed's default)
             await self._upload(points, data.max_speed, exit_on_rc_lost=self._exit_on_rc_lost(data))
-            await self.ground_station("wp_start_stop", {"start": 0})
-            self.mission_started(task)
+            await self.start_mission(task)
         except DeviceRejected as exc:
             self._progress(task, "wayline_failed", 0, exc.result)
             return

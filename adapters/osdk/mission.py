@@ -246,6 +246,9 @@ class MissionHost(Protocol):
     def mission_started(self, task: Task) -> None:
         """The FC accepted the start of ``task``'s mission: from now on it may disagree."""
 
+    async def start_mission(self, task: Task) -> None:
+        """Start the uploaded mission of ``task``; a refused start ends the task and raises."""
+
     def mission_stopped(self) -> None:
         """The FC acknowledged a mission stop: it flies none from now (whatever its last push said)."""
 

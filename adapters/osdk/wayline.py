@@ -141,8 +141,7 @@ class OsdkWayline:
                     change.add_done_callback(self._speed_changes.discard)
 
             task.on_reached = reached
-            await self.adapter.ground_station("wp_start_stop", {"start": 0})
-            self.adapter.mission_started(task)
+            await self.adapter.start_mission(task)
             if k == 0:
                 on_entered()
             await self._until_over(task)
@@ -241,7 +240,11 @@ class OsdkWayline:
         task = Task("go_home", flight_id, 0)
         self._task = task
         self.adapter.begin_mission(task)
-        await self.adapter.flight_task("go_home")
+        try:
+            await self.adapter.flight_task("go_home")
+        except Exception:
+            task.finished = True  # never started: nothing to follow
+            raise
         self.adapter.mission_started(task)
 
     async def return_home(self, path: list[tuple[float, float, float]], speed: float, flight_id: str) -> None:
@@ -266,8 +269,7 @@ class OsdkWayline:
         task = Task("return_home", flight_id, len(path))
         self._task = task
         a.begin_mission(task)
-        await a.ground_station("wp_start_stop", {"start": 0})
-        a.mission_started(task)
+        await a.start_mission(task)
 
     @property
     def mission_running(self) -> bool:
