@@ -341,5 +341,5 @@ class AircraftTruth(RuleBasedStateMachine):
             assert self.model.run is None or not task.started
 
 
-AircraftTruth.TestCase.settings = settings(max_examples=25, stateful_step_count=12, deadline=None)
+AircraftTruth.TestCase.settings = settings(max_examples=60, stateful_step_count=15, deadline=None)
 test_the_aircraft_truth_state_machine = AircraftTruth.TestCase

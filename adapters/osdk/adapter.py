@@ -427,7 +427,7 @@ class AircraftAdapter(SupervisedAdapter):
         if task is not None and task.kind == "go_home" and task.live and task.started and not self.in_air:
             task.finished = True  # the FC's go home ends on the ground at home
             task.done.set()
-        running = self.fc.running(t.display_mode, now)
+        mission_running = running = self.fc.running(t.display_mode, now)
         if task is not None and task.kind == "go_home":
             running = t.display_mode in (DM_GO_HOME, DM_AUTO_LANDING)  # the FC's own, not a mission
         broken = self.fc.broken_at >= now - 1.0 and self.fc.broken_at > self._mission_ended_at
@@ -446,7 +446,7 @@ class AircraftAdapter(SupervisedAdapter):
             self._ended_task = task  # ended here (finished, stopped, failed): its status pushes fade
             self._mission_ended_at = now
         if (
-            running
+            mission_running
             and self.in_air
             and (task is None or not task.live)
             and now - self._mission_ended_at > STATUS_STALE + 0.5

@@ -237,14 +237,13 @@ class OsdkWayline:
     async def go_home(self, flight_id: str) -> None:
         """The FC's own go home (``01 01`` task 6: it climbs to its go-home altitude, flies home and
         lands), followed as a task of kind ``go_home`` (the FC's display mode says it runs)."""
+        current = self.adapter.current_mission
+        if current is not None and current.kind == "go_home" and current.live:
+            return  # asked again while it goes home: the same go home (clouds resend)
+        await self.adapter.flight_task("go_home")  # refused: whatever flew before still flies
         task = Task("go_home", flight_id, 0)
         self._task = task
         self.adapter.begin_mission(task)
-        try:
-            await self.adapter.flight_task("go_home")
-        except Exception:
-            task.finished = True  # never started: nothing to follow
-            raise
         self.adapter.mission_started(task)
 
     async def return_home(self, path: list[tuple[float, float, float]], speed: float, flight_id: str) -> None:
