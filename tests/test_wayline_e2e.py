@@ -541,7 +541,8 @@ def test_an_emergency_stop_ends_the_task_and_a_new_one_flies(rig: dict[str, Any]
     flight = _prepare_and_execute(rig)
     _flying_leg_one(rig, flight)
     assert _osd_mode(cloud) == 5
-    cloud.publish(f"thing/product/{GW}/drc/down", json.dumps({"method": "drone_emergency_stop", "data": {}}), 0)
+    stop = json.dumps({"method": "drone_emergency_stop", "data": {}})
+    cloud.publish(f"thing/product/{GW}/drc/down", stop, 0)
     stopped_at = time.monotonic()
     terminal = ("canceled", "failed", "ok")
     wait_until(lambda: _status(cloud, flight)[-1] in terminal, 3.0, what="a terminal progress")
@@ -566,7 +567,7 @@ def test_an_emergency_stop_ends_the_task_and_a_new_one_flies(rig: dict[str, Any]
 def test_sticks_during_a_wayline_are_refused_and_do_nothing(rig: dict[str, Any]) -> None:
     """A DRC session entered during a wayline is accepted (payloads, pushes, the stop), but its sticks are
     answered with a non-zero result naming what flies the aircraft, and the route flies on unchanged."""
-    cloud, fc = rig["cloud"], rig["fc"]
+    cloud = rig["cloud"]
     flight = _prepare_and_execute(rig)
     _flying_leg_one(rig, flight)
     broker = rig["gw"].app.settings.broker.url
