@@ -172,6 +172,9 @@ class Harness:
         assert (m.session_id is None) == (m.state is ds.State.IDLE)
         assert len(self.opening) + len(self.open) + len(self.closing) <= 1
         assert self.setpoint == m.setpoint
+        assert (m.failsafe is None) == (m.failsafe_since is None), "a failsafe without its incident's start"
+        if m.state is ds.State.HOLDING:
+            assert m.failsafe is not None, "holding with no failsafe to show"
         if m.state in (ds.State.ACTIVE, ds.State.HOLDING):
             assert self.observed_at - self.hb_at <= CFG.idle_timeout, "a silent session was not ended"
         if self.setpoint != ds.ZERO:
@@ -579,3 +582,43 @@ def test_five_copies_of_enter_and_of_exit_make_one_session_and_one_exit() -> Non
     feed(ds.LinkClosed(h.now, min(h.closing)))
     assert [h.answers[r] for r in exits] == [[0]] * 5 and reports == [1, 2, 0]
     assert h.m.state is ds.State.IDLE and not (h.opening or h.open or h.closing)
+
+
+def test_the_failsafe_is_one_incident_owned_by_the_session_and_ends_with_it() -> None:
+    """Issue #31: an emergency stop, exit and enter again: the new session shows no failsafe (its osd said
+    emergency_stop while sticks flew the aircraft); a failsafe firing again keeps its incident's start,
+    another reason starts a new one."""
+    h = Harness()
+    sid = _live(h, "drc-a")
+    h.feed(ds.EStop(h.now, sid, h.request("estop")))
+    assert (h.m.failsafe, h.m.failsafe_since) == ("emergency_stop", h.now)
+    first = h.now
+    h.now += 5.0
+    h.feed(ds.EStop(h.now, sid, h.request("estop")))  # the same incident, repeated
+    assert h.m.failsafe_since == first
+    h.feed(ds.Exit(h.now, h.request("exit")))
+    h.feed(ds.LinkClosed(h.now, min(h.closing)))
+    assert (h.m.failsafe, h.m.failsafe_since) == (None, None)  # the session ended: so did its failsafe
+    h.now += 30.0
+    sid = _live(h, "drc-b")
+    assert h.m.failsafe is None
+    h.feed(ds.Stick(h.now, sid, h.request("stick"), 1, MOVE))
+    assert h.setpoint == MOVE and h.m.failsafe is None
+    h.now += 1.0
+    h.feed(ds.Tick(h.now))  # the sticks stop: a new incident, now
+    assert (h.m.failsafe, h.m.failsafe_since) == ("sticks", h.now)
+    h.feed(ds.BrokerLost(h.now + 0.1, sid))  # another reason: another incident
+    assert (h.m.failsafe, h.m.failsafe_since) == ("link_lost", h.now + 0.1)
+
+
+def test_a_stick_refused_for_an_automatic_task_says_why() -> None:
+    h = Harness()
+    sid = _live(h)
+    req = h.request("stick")
+    reason = "waypoint mission flies OSDK-1: stop it (or wait for its end) to fly by sticks"
+    actions = h.feed(
+        ds.Stick(h.now, sid, req, 1, MOVE, authorized=False, denied_result=314000, denied_reason=reason)
+    )
+    assert h.answers[req] == [314000] and h.setpoint == ds.ZERO
+    replies = [a for a in actions if isinstance(a, ds.StickReply)]
+    assert replies[0].reason == reason
