@@ -258,7 +258,7 @@ class AircraftAdapter(SupervisedAdapter):
             with contextlib.suppress(Exception):
                 self._fire("wp_start_stop", {"start": 1})
             # the cloud hears the task's end (its final progress event), as after fly_to_point_stop
-            task.finished = True
+            task.finished = task.canceled = True
             if self._mission_task is not None:
                 self._mission_task.cancel()
             self._progress(task, "wayline_cancel", task.reached - task.offset)
@@ -365,7 +365,7 @@ class AircraftAdapter(SupervisedAdapter):
         """``task`` is the mission the FC flies from now on: its pushes go to it."""
         old = self.mission
         if old is not None and old is not task and old.live:
-            old.finished = True  # replaced (a chained mission, a new task): it is over
+            old.finished = old.canceled = True  # replaced (a new task): it is over
         self.mission = task
         self._stop_requested = None
         self._disagree_since = None
@@ -926,8 +926,8 @@ class AircraftAdapter(SupervisedAdapter):
     def _progress(
         self, task: Task, status: str, index: int, result: int = 0, *, need_reply: bool = True
     ) -> None:
-        if self._sink is None or task.kind == "wayline":  # a wayline reports through gateway/wayline
-            return
+        if self._sink is None or task.kind not in ("fly_to", "takeoff"):
+            return  # waylines, the way home and adopted missions report through gateway/wayline
         index = max(0, index)
         if task.kind == "fly_to":
             left = self._remaining(task, status)
@@ -1012,7 +1012,7 @@ class AircraftAdapter(SupervisedAdapter):
         self.mission_stopped()
         task = self.mission
         if task is not None and task.live:
-            task.finished = True  # no wayline_ok for a cancelled task
+            task.finished = task.canceled = True  # no wayline_ok for a cancelled task
             if self._mission_task is not None:
                 self._mission_task.cancel()
             self._progress(task, "wayline_cancel", task.reached - task.offset)

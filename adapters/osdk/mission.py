@@ -111,6 +111,7 @@ class Task:
     finished: bool = False
     failed: int | None = None
     dropped: str | None = None
+    canceled: bool = False  # ended by a stop the gateway sent (finished is set too)
     started: bool = False
     adopted: bool = False
     #: told the mission index of every waypoint reached (wayline tasks: adapters/osdk/wayline.py)

@@ -158,6 +158,8 @@ class OsdkWayline:
             await self.adapter.clock.sleep(POLL)
         if task.failed is not None:
             raise DeviceRejected(task.failed, "the flight controller reported a mission error")
+        if task.canceled:
+            raise MissionStopped("the mission was stopped")
         if task.dropped is not None:
             if task.dropped == "emergency stop":
                 raise MissionStopped("emergency stop: the flight controller braked and dropped the mission")
@@ -207,7 +209,7 @@ class OsdkWayline:
         nothing left to stop: the task ends all the same."""
         task = self._task
         if task is not None and task.live:
-            task.finished = True
+            task.finished = task.canceled = True
         if task is not None and task.kind == "go_home":
             await self.adapter.flight_task("exit_go_home")  # the FC hovers where it is
             return
