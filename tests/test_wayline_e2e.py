@@ -366,6 +366,10 @@ def test_return_home_ends_the_task_and_lands_at_home(rig: dict[str, Any]) -> Non
     home = info["planned_path_points"][-1]
     assert _distance(home["latitude"], home["longitude"], *HOME) < 1.0
     assert abs(home["height"] - (HOME_ALT + 40.0)) < 0.5  # rth_altitude 40 m above the take-off point
+    # the way home is a mission on the FC, and the osd says what it is: 9 return home, not 5 wayline
+    cloud.clear()
+    wait_until(lambda: cloud.find(f"{SN}/osd", lambda b: "mode_code" in b["data"]), 5, what="a fresh osd")
+    assert _osd_mode(cloud) == 9
     # over home, then the FC's landing (the mission's finish action 2); the descent itself is the FC's
     wait_until(lambda: fc.inspect(lambda m: m.task == "landing"), 30, what="landing over home")
     assert fc.inspect(lambda m: math.hypot(m.n, m.e)) < 2.0
