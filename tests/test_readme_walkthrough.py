@@ -28,6 +28,7 @@ REPO = Path(__file__).resolve().parents[1]
 README = (REPO / "README.md").read_text()
 COMMAND_LANGS = frozenset({"sh", "bash", "shell"})
 SKIP = re.compile(r"<!--\s*readme-test:\s*skip\s*\((.+)\)\s*-->")
+WAIT_FOR = "@wait-for-monitor:"  # a "# once the monitor shows X" comment: wait until the monitor shows X
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,9 @@ class Block:
             line = raw.strip()
             if m := re.match(r"#\s*terminal (\d+)", line):
                 current = int(m.group(1))
+                continue
+            if m := re.match(r"#\s*once the monitor shows (\w+)", line):
+                out.append((current, f"{WAIT_FOR}{m.group(1)}"))  # the reader waits for it: so does the test
                 continue
             line = re.sub(r"\s+#.*$", "", line)
             if line and not line.startswith("#"):
@@ -207,6 +211,9 @@ def test_every_readme_command_block_runs_as_a_reader_would() -> None:
             if block.skip is not None:
                 continue
             for term, command in block.terminals():
+                if command.startswith(WAIT_FOR):
+                    _wait_for_monitor(services, command.removeprefix(WAIT_FOR))
+                    continue
                 term = last if term is None else term
                 last = term
                 shell = terminals.setdefault(term, Terminal(env, port))
@@ -258,6 +265,18 @@ def test_every_readme_command_block_runs_as_a_reader_would() -> None:
                     proc.wait(5)
             if proc.stdout:
                 proc.stdout.close()
+
+
+def _wait_for_monitor(services: dict[str, tuple[subprocess.Popen[str], list[str]]], text: str) -> None:
+    """What a reader does at "# once the monitor shows X": watch the monitor's terminal until X is there."""
+    (shown,) = [out for name, (_, out) in services.items() if name.startswith("dji-gateway monitor")]
+    wait_until(lambda: any(text in ln for ln in shown), 60, what=f"{text} in the monitor")
+
+
+def _wait_for_monitor(services: dict[str, tuple[subprocess.Popen[str], list[str]]], text: str) -> None:
+    """What a reader does at "# once the monitor shows X": watch the monitor's terminal until X is there."""
+    (shown,) = [out for name, (_, out) in services.items() if name.startswith("dji-gateway monitor")]
+    wait_until(lambda: any(text in ln for ln in shown), 60, what=f"{text} in the monitor")
 
 
 def _check_what_the_reader_saw(

@@ -753,7 +753,8 @@ class AircraftAdapter(SupervisedAdapter):
                     task.on_reached(index)
                 if index >= task.offset:
                     self._progress(task, "wayline_progress", index - task.offset)
-        elif incident == 1:  # mission finished
+        elif incident == 1:  # mission finished: the FC flies none from now on
+            self.mission_stopped()
             task.finished = True
             task.done.set()
 
