@@ -255,6 +255,13 @@ class AircraftTruth(RuleBasedStateMachine):
         self._call(lambda: self.adapter.wayline.go_home("rth"))
 
     @rule()
+    def return_home_by_mission(self) -> None:
+        """The gateway's own way home (a two-waypoint mission), when it can build one."""
+        path = self.adapter.wayline.return_home_plan(30.0)
+        if path is not None:
+            self._call(lambda: self.adapter.wayline.return_home(path, 10.0, "rth"))
+
+    @rule()
     def return_home_cancel(self) -> None:
         if self.adapter.wayline.mission_running:
             self._call(self.adapter.wayline.cancel)
@@ -309,7 +316,12 @@ class AircraftTruth(RuleBasedStateMachine):
         fc_go_home = m.task in ("go_home", "landing")
         live = task is not None and task.live
         if live and task is not None:
-            flying = fc_go_home if task.kind == "go_home" else fc_mission
+            # the gateway's way home lands at its end: the FC's landing is that task's last phase
+            flying = (
+                fc_go_home
+                if task.kind == "go_home"
+                else fc_mission or (task.kind == "return_home" and m.task == "landing")
+            )
             assert flying, f"task {task.kind} live, the FC flies {m.task!r}"
         else:
             assert not fc_mission or (task is not None and task.adopted), (

@@ -362,13 +362,47 @@ class AircraftAdapter(SupervisedAdapter):
         return self.mission
 
     def begin_mission(self, task: Task) -> None:
-        """``task`` is the mission the FC flies from now on: its pushes go to it."""
-        old = self.mission
-        if old is not None and old is not task and old.live:
-            old.finished = old.canceled = True  # replaced (a new task): it is over
+        """``task`` is the mission the FC flies from now on: its pushes go to it. Refused while another
+        task is live (the FC would refuse the start, 0xD5, after the upload had replaced what it holds):
+        whoever means to replace one stops it first (:meth:`stop_current_mission`)."""
+        self.require_no_mission()
         self.mission = task
         self._stop_requested = None
         self._disagree_since = None
+
+    def require_no_mission(self) -> None:
+        """Raise (314000, naming it) while a task is live: checked before anything is uploaded."""
+        old = self.mission
+        if old is not None and old.live:
+            what = KIND_WORDS.get(old.kind, old.kind)
+            name = f" {old.task_id}" if old.task_id else ""
+            raise DeviceRejected(
+                ResultCode.BUSY, f"{what}{name} is flying: stop it first (or return home, which does)"
+            )
+
+    async def stop_current_mission(self) -> None:
+        """Stop whatever task the FC flies for the gateway (a mission: ``03 12`` cancel; the FC's go home:
+        exit go home) and end it canceled, told to whoever follows it. A FC that flies no mission (0xD4)
+        has nothing left to stop: the task ends all the same."""
+        task = self.mission
+        if task is not None and task.kind == "go_home" and task.live:
+            await self.flight_task("exit_go_home")  # the FC hovers where it is
+        else:
+            try:
+                await self.ground_station("wp_start_stop", {"start": 1})
+            except DeviceRejected as exc:
+                # 0xD4 "mission not running": the FC flies nothing (the device is the truth); any other
+                # refusal is the answer
+                if exc.detail.get("ack") != MISSION_NOT_RUNNING:
+                    raise
+            self.mission_stopped()
+        if task is not None and task.live:
+            task.finished = task.canceled = True  # no wayline_ok for a cancelled task
+            task.done.set()
+            if task.kind in ("fly_to", "takeoff"):
+                if self._mission_task is not None:
+                    self._mission_task.cancel()
+                self._progress(task, "wayline_cancel", task.reached - task.offset)
 
     def mission_started(self, task: Task) -> None:
         """The FC acknowledged the start of ``task``'s mission: from now on it may disagree."""
@@ -986,6 +1020,7 @@ class AircraftAdapter(SupervisedAdapter):
                 f"points: a ground-station mission holds {MAX_MISSION_POINTS} waypoints, one of them where "
                 f"the aircraft is now: at most {MAX_MISSION_POINTS - 1} points"
             )
+        self.require_no_mission()  # before anything is uploaded over the mission the FC holds
         here = (t.latitude or 0.0, t.longitude or 0.0, t.height or 0.0)
         points = [here, *((p.latitude, p.longitude, self._relative(p.height)) for p in data.points)]
         for index, (_, _, height) in enumerate(points[1:]):
@@ -1003,20 +1038,7 @@ class AircraftAdapter(SupervisedAdapter):
 
     async def _fly_to_point_stop(self, data: FlyToPointStop) -> CallResult:
         self._require_online()
-        try:
-            await self.ground_station("wp_start_stop", {"start": 1})
-        except DeviceRejected as exc:
-            # 0xD4 "mission not running": the FC flies nothing, so the stop has nothing left to do but
-            # end the task (the device is the truth); any other refusal is the answer
-            if exc.detail.get("ack") != MISSION_NOT_RUNNING:
-                raise
-        self.mission_stopped()
-        task = self.mission
-        if task is not None and task.live:
-            task.finished = task.canceled = True  # no wayline_ok for a cancelled task
-            if self._mission_task is not None:
-                self._mission_task.cancel()
-            self._progress(task, "wayline_cancel", task.reached - task.offset)
+        await self.stop_current_mission()
         return CallResult()
 
     def _check_height(self, name: str, height: float) -> None:
@@ -1125,6 +1147,7 @@ class AircraftAdapter(SupervisedAdapter):
         if self.in_air:
             raise DeviceRejected(ResultCode.BUSY, "the aircraft is already in the air")
         self._check_takeoff(data)
+        self.require_no_mission()
         if self.fw == "new":
             await self._set_go_home_altitude(int(data.rth_altitude))
         await self.flight_task("takeoff")

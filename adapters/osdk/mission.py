@@ -250,6 +250,12 @@ class MissionHost(Protocol):
     async def start_mission(self, task: Task) -> None:
         """Start the uploaded mission of ``task``; a refused start ends the task and raises."""
 
+    def require_no_mission(self) -> None:
+        """Raise while a task is live (before anything is uploaded)."""
+
+    async def stop_current_mission(self) -> None:
+        """Stop whatever task the FC flies for the gateway and end it canceled."""
+
     def mission_stopped(self) -> None:
         """The FC acknowledged a mission stop: it flies none from now (whatever its last push said)."""
 

@@ -35,7 +35,6 @@ __all__ = ["MissionStopped", "OsdkWayline", "Reached"]
 
 AUTO_TAKEOFF = 11
 POLL = 0.05
-MISSION_NOT_RUNNING = 0xD4  # ground-station ACK: no mission is running
 #: closer than this (m) to home, the gateway's two-waypoint way home cannot be flown: the FC's go home is
 MIN_HOME_DISTANCE = 2.0
 
@@ -121,6 +120,7 @@ class OsdkWayline:
         DeviceRejected (FC refused or reported a mission error, ``result``), DeviceTimeout, or
         MissionStopped."""
         for k, mission in enumerate(plan.missions):
+            self.adapter.require_no_mission()  # before the upload replaces what the FC holds
             await self._upload(mission)
             task = Task("wayline", flight_id, len(mission.waypoints))
             self._task = task
@@ -205,20 +205,9 @@ class OsdkWayline:
         self.paused = False
 
     async def cancel(self) -> None:
-        """Stop the mission: the FC brakes and hovers where it is. A FC that flies none (0xD4) has
-        nothing left to stop: the task ends all the same."""
-        task = self._task
-        if task is not None and task.live:
-            task.finished = task.canceled = True
-        if task is not None and task.kind == "go_home":
-            await self.adapter.flight_task("exit_go_home")  # the FC hovers where it is
-            return
-        try:
-            await self.adapter.ground_station("wp_start_stop", {"start": 1})
-        except DeviceRejected as exc:
-            if exc.detail.get("ack") != MISSION_NOT_RUNNING:
-                raise
-        self.adapter.mission_stopped()
+        """Stop the mission: the FC brakes and hovers where it is (the adapter's
+        :meth:`stop_current_mission`; a FC that flies none has nothing left to stop)."""
+        await self.adapter.stop_current_mission()
 
     def return_home_plan(self, rth_altitude: float) -> list[tuple[float, float, float]] | None:
         """The way home the gateway flies: up to ``rth_altitude`` over the aircraft, over home at that
@@ -242,15 +231,20 @@ class OsdkWayline:
         current = self.adapter.current_mission
         if current is not None and current.kind == "go_home" and current.live:
             return  # asked again while it goes home: the same go home (clouds resend)
-        await self.adapter.flight_task("go_home")  # refused: whatever flew before still flies
+        if current is not None and current.live:
+            await self.adapter.stop_current_mission()  # return home is the abort path of every task
+        await self.adapter.flight_task("go_home")
         task = Task("go_home", flight_id, 0)
         self._task = task
         self.adapter.begin_mission(task)
         self.adapter.mission_started(task)
 
     async def return_home(self, path: list[tuple[float, float, float]], speed: float, flight_id: str) -> None:
-        """Fly ``path`` as a mission that lands at its end (action_on_finish 2); returns once started."""
+        """Fly ``path`` as a mission that lands at its end (action_on_finish 2); returns once started.
+        Whatever task flies is stopped first: return home is the abort path of every task."""
         a = self.adapter
+        if a.current_mission is not None and a.current_mission.live:
+            await a.stop_current_mission()
         init = {
             "length": len(path),
             "vel_cmd_range": a.settings.mission_vel_cmd_range,
