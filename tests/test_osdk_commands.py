@@ -386,6 +386,26 @@ def test_version_reply_in_each_firmware_layout() -> None:
     assert decode_ack("get_version", A3_REPLY).fields == {"ack": 0, "version_data": A3_REPLY[2:]}
 
 
+# The M100 on firmware 3.1.10.0 (what DJI's Onboard-SDK 3.x accepts): u16 ack, u32 CRC, the ID and its NUL
+# (together at most 16 bytes, the library's buffer), the name with the third number a tenth of the real one.
+M100_31_REPLY = (
+    b"\x00\x00" + b"\xee\x48\x1b\xce" + b"SIMFC00001\x00" + b"SDK-v1.1 BETA M100-03.01.01.00".ljust(32, b"\0")
+)
+
+
+def test_the_m100_3_1_reply_and_what_the_library_cannot_read() -> None:
+    m100 = parse_version_reply(*_ack_and_body(M100_31_REPLY))
+    assert (m100.layout, m100.version_crc, m100.serial) == ("crc_id", 0xCE1B48EE, "SIMFC00001")
+    assert (m100.hardware, m100.firmware) == ("M100", "03.01.01.00")
+    kw: dict[str, Any] = {"layout": "crc_id", "serial": "SIMFC00001", "version_crc": 0xCE1B48EE}
+    assert encode_version_reply(0, m100.name, **kw) == M100_31_REPLY
+    # the library reads CRC + ID up to the first NUL: a zero CRC byte would cut it, a long ID overflow it
+    with pytest.raises(ValueError, match="zero byte"):
+        encode_version_reply(0, m100.name, layout="crc_id", serial="SIMFC00001", version_crc=0xCE1B00EE)
+    with pytest.raises(ValueError, match="longer"):
+        encode_version_reply(0, m100.name, layout="crc_id", serial="SIMFC0000001", version_crc=0xCE1B48EE)
+
+
 def test_a_version_reply_that_fits_no_layout_is_an_error() -> None:
     with pytest.raises(ValueError, match="ID"):
         parse_version_reply(0, b"X" * 40)  # no NUL, no name

@@ -232,6 +232,62 @@ def test_activation_gates_every_other_command_set() -> None:
     assert host.request("obtain_control", {"control": 1})["ack"] == 0x0002
 
 
+def _library_reads_version(reply: bytes) -> tuple[str, tuple[int, int, int, int], int, str] | None:
+    """What DJI's Onboard-SDK 3.x makes of a 0x00 0x00 reply (``Vehicle::parseDroneVersionInfo``, 3.8.1 and
+    3.9.0, re-told step by step): (hardware, firmware, version CRC, serial), or None where it gives up."""
+    at = 2
+    crc_id = bytearray()
+    while reply[at] != 0:  # CRC and/or ID up to the first NUL, at most 16 bytes
+        crc_id.append(reply[at])
+        at += 1
+        if at > 18:
+            return None
+    at += 1
+    name = reply[at : at + 32]
+    words = name.split(b" ", 2)  # "SDK-v1.x" "BETA" "<hardware>-<a>.<b>.<c>.<d>"
+    if len(words) < 3 or b"-" not in words[2]:
+        return None
+    hardware, _, numbers = words[2].partition(b"-")
+    parts = numbers.split(b"\0", 1)[0].split(b".")
+    if len(parts) != 4:
+        return None
+    a, b, c, d = (int(p) for p in parts)
+    if hardware == b"M100" or (a, b, c, d) == (3, 2, 10, 0):
+        c *= 10  # "Bug in M100 does not report the right FW" (and M600/A3 3.2.10)
+    if (a, b, c, d) < (3, 2, 0, 0):
+        if len(crc_id) < 4 or len(crc_id) - 4 > 12:
+            return None
+        return hardware.decode(), (a, b, c, d), int.from_bytes(crc_id[:4], "little"), crc_id[4:].decode()
+    return hardware.decode(), (a, b, c, d), 0, crc_id.decode()
+
+
+M100_31 = (3, 1, 10, 0)  # OSDK Version::M100_31: the one M100 firmware the 3.x library runs on
+EXTENDED_VERSION_BASE = (3, 2, 36, 6)  # the library refuses anything else older ("Upgrade firmware")
+
+
+@pytest.mark.parametrize("firmware", ["new", "m100"])
+def test_version_reply_is_one_dji_onboard_sdk_3_accepts(firmware: str) -> None:
+    """The M100 simulator used to answer CRC + ``M100-02.03.00.00`` (the 2.3 protocol): the 3.x library
+    stopped at "Drone version not obtained". Now each firmware answers in the layout and with a version
+    that the library's own parsing accepts (checked by hand against the built library: docs/osdk.md)."""
+    host = FakeHost(OsdkFcModel(firmware=firmware))
+    raw, seq = host.frame("get_version", {"arbitrary": 0})
+    host.write(raw)
+    reply = host.ack_for(2, seq).data
+    read = _library_reads_version(reply)
+    assert read is not None
+    hardware, version, crc, serial = read
+    info = cmds.parse_version_reply(int.from_bytes(reply[:2], "little"), reply[2:])  # the gateway's reading
+    if firmware == "m100":
+        assert (hardware, version, serial) == ("M100", M100_31, "SIMFC00001")
+        assert crc != 0 and 0 not in crc.to_bytes(4, "little")
+        assert (info.layout, info.hardware, info.firmware) == ("crc_id", "M100", "03.01.01.00")
+        assert (info.version_crc, info.serial) == (crc, serial)
+    else:
+        assert hardware == "A3" and version >= EXTENDED_VERSION_BASE and serial == "SIMFC0000000001"
+        assert (info.layout, info.hardware, info.serial) == ("id", "A3", serial)
+
+
 def test_unactivated_ignore_policy_answers_nothing() -> None:
     host = FakeHost(OsdkFcModel(unactivated="ignore"))
     raw, seq = host.frame("wp_start_stop", {"start": 0})

@@ -110,7 +110,13 @@ EARTH_RADIUS_M = 6378137.0  # flat-earth approximation around home (module docst
 DEFAULT_HOME = (22.5431, 113.9580)  # degrees
 NOT_ACTIVATED_ACK = 0xFF01  # OSDK ErrorCode::CommonACK::NO_AUTHORIZATION_ERROR
 M100_TASK_STARTED, M100_TASK_FAILED = 0x0002, 0x0001  # M100 0x01 0x01 ACKs (FLIGHT_TASK_M100_ACK)
-M100_VERSION_NAME = "SDK-v1.0 BETA M100-02.03.00.00"  # an M100 on the legacy (2.3) protocol; illustrative
+#: An M100 on firmware 3.1.10.0 (OSDK ``Version::M100_31``, the only M100 firmware DJI's Onboard-SDK 3.x
+#: accepts), as it writes it: the third number a tenth of the real one (the library multiplies it by 10
+#: for "M100"). It answers in the 3.1 layout (u32 CRC, ID and its NUL, name): the seed-era "M100 2.3"
+#: reply (CRC + name, ``M100-02.03.00.00``) stops the 3.x library at "Drone version not obtained".
+M100_VERSION_NAME = "SDK-v1.1 BETA M100-03.01.01.00"
+#: The M100's ID after the CRC: 10 characters and the NUL (the 3.1-era library reads an 11-byte ID).
+M100_SERIAL = "SIMFC00001"
 NO_RIGHTS_ACK = 0xFF02  # OSDK ErrorCode::CommonACK::NO_RIGHTS_ERROR (flight task without authority)
 #: A command the simulated FC does not implement, asking for an answer: u16 OSDK
 #: ``ErrorCode::CommonACK::KEY_ERROR`` (0xFF00). Which code real firmware uses is not confirmed; what
@@ -280,7 +286,7 @@ class OsdkFcModel:
         lost_authority_mode: SessionMode = SessionMode.ACK_REQUIRED,
         version_name: str | None = None,
         version_layout: str | None = None,
-        serial: str = "SIMFC0000000001",
+        serial: str | None = None,
         firmware: str = "new",
     ) -> None:
         if unactivated not in ("ack", "ignore"):
@@ -293,7 +299,9 @@ class OsdkFcModel:
         if version_name is None:
             version_name = M100_VERSION_NAME if legacy else "SDK-v1.1 BETA A3-03.03.100.00"
         if version_layout is None:
-            version_layout = "crc" if legacy else "id"
+            version_layout = "crc_id" if legacy else "id"
+        if serial is None:
+            serial = M100_SERIAL if legacy else "SIMFC0000000001"
         self._item_names = tuple(it.name for it in TELEMETRY_ITEMS[firmware])
         self._flown = False  # an M100 reports "landed" (5), not "standby" (1), after a flight
         # configuration (plain attributes: tests change them between steps)
@@ -321,7 +329,8 @@ class OsdkFcModel:
         self.obstacle_sensors: set[str] = set()
         self.obstacle_range = 30.0
         self.version_layout = version_layout  # how 0x00 0x00 is answered: cmds.encode_version_reply
-        self.serial = serial  # the flight controller's ID string in the version reply (<= 15 characters)
+        # the flight controller's ID string in the version reply (<= 15 characters; <= 11 after a CRC)
+        self.serial = serial
         self.battery_capacity_mah = 4500
         # link
         self._decoder = Decoder()
@@ -568,9 +577,13 @@ class OsdkFcModel:
     # -- 0x00 activation set ------------------------------------------------------------------------
     def _on_get_version(self, f: dict[str, Any], now: float) -> dict[str, Any]:
         """The firmware's own layout (``version_layout``): ``id`` for A3/N3/M600/M210 firmware, as DJI's
-        Onboard-SDK 3.x library reads it; ``crc`` for M100 2.3; ``crc_id`` for firmware 3.1."""
+        Onboard-SDK 3.x library reads it; ``crc_id`` for firmware 3.1 (the M100 3.1.10.0); ``crc`` for
+        M100 2.3."""
         ack = 0 if self.activated else NOT_ACTIVATED_ACK
+        # The library finds the end of CRC + ID at the first NUL, so a real 3.1 firmware's CRC has no zero
+        # byte (DJI's library reads real M100s); this stand-in CRC gets none either.
         crc = zlib.crc32(self.version_name.encode()[:32])
+        crc = int.from_bytes(bytes(b or 1 for b in crc.to_bytes(4, "little")), "little")
         raw = cmds.encode_version_reply(
             ack, self.version_name, layout=self.version_layout, serial=self.serial, version_crc=crc
         )
