@@ -125,6 +125,7 @@ def test_table_keys_and_session_rules() -> None:
         ("subscribe_remove_package", [1], [1]),
         ("subscription_data_push", [None], []),
         ("go_home_altitude_write", [6], [7, 13]),
+        ("go_home_altitude_read", [4], [7, 13]),
     ],
 )
 def test_packed_sizes(name: str, sizes: list[int], ack_sizes: list[int | None]) -> None:
@@ -474,6 +475,23 @@ def test_go_home_altitude_write_bytes() -> None:
         decode_request(0x01, 0x42, bytes.fromhex("01000000 3c00"))
     with pytest.raises(UnknownCommandError, match="does not exist on firmware 'm100'"):
         spec_for("go_home_altitude_write", "m100")
+
+
+def test_go_home_altitude_read_bytes() -> None:
+    # DJI Onboard-SDK 3.9 FlightAssistant::getGoHomeAltitude: 0x01 0x41 (parameterRead), the u32 hash alone;
+    # the ACK is the write's: {u8 ret, u32 hash, u16 value} or the value padded to 8 bytes
+    assert encode_request("go_home_altitude_read") == bytes.fromhex("dc63cc38")
+    assert decode_request(0x01, 0x41, bytes.fromhex("dc63cc38")).fields == {"hash": c.GO_HOME_ALTITUDE_HASH}
+    ack = c.decode_ack("go_home_altitude_read", bytes.fromhex("00 dc63cc38 1400"))
+    assert ack.fields == {"ack": 0, "hash": 952919004, "altitude": 20}
+    assert (
+        c.decode_ack("go_home_altitude_read", bytes.fromhex("00 dc63cc38 1400") + bytes(6)).fields["altitude"]
+        == 20
+    )
+    with pytest.raises(LayoutError):  # USE_RTK_DATA's hash: another parameter
+        decode_request(0x01, 0x41, (1288992843).to_bytes(4, "little"))
+    with pytest.raises(UnknownCommandError, match="does not exist on firmware 'm100'"):
+        spec_for("go_home_altitude_read", "m100")
 
 
 def test_kill_switch_layout() -> None:

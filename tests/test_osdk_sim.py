@@ -674,6 +674,27 @@ def test_a_truncated_frame_does_not_hold_back_the_next_one() -> None:
     assert (3, seq) in host.acks and host.model.bad_frames >= 1
 
 
+def test_go_home_altitude_read_answers_the_value_held() -> None:
+    """``01 41`` used to get the unknown-command 0xFF00; DJI's library (getGoHomeAltitudeSync) reads the
+    value from the write's ACK layout and wants its hash echoed."""
+    host = FakeHost()
+    host.activate_and_obtain()
+    raw, seq = host.frame("go_home_altitude_read")
+    host.write(raw)
+    ack = host.ack_for(2, seq).data
+    assert ack == bytes([0]) + cmds.GO_HOME_ALTITUDE_HASH.to_bytes(4, "little") + (20).to_bytes(2, "little")
+    assert host.request("go_home_altitude_write", {"altitude": 75})["ack"] == 0
+    assert host.request("go_home_altitude_read") == {
+        "ack": 0,
+        "hash": cmds.GO_HOME_ALTITUDE_HASH,
+        "altitude": 75,
+    }
+    assert host.model.actions["go_home_altitude_read"] == 2 and host.model.unknown_commands == 0
+    # another parameter's hash (USE_RTK_DATA): ret code 1, nothing else read
+    host.write(encode_command(0x01, 0x41, (1288992843).to_bytes(4, "little"), 2, 7))
+    assert host.ack_for(2, 7).data[0] == 1
+
+
 def test_bad_payloads_get_the_commands_invalid_code() -> None:
     host = FakeHost()
     host.request("activate", {"app_id": APP_ID})

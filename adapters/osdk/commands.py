@@ -663,6 +663,10 @@ PARAM_ACK: dict[int, str] = {0: "written"}
 GO_HOME_ALTITUDE_WRITE = Layout(
     (_f("hash", "I", "", "GO_HOME_ALTITUDE_HASH"), _f("altitude", "H", "m", "go-home altitude, 20..500"))
 )
+# 0x01 0x41 parameter read by hash (FlightAssistant::readParameterByHash, getGoHomeAltitude): u32 hash only;
+# the ACK is the write's (u8 ret code, the hash, the value held). OSDK's sync read wants the hash echoed and
+# at most 13 bytes, its async decoder at least the 7 of GoHomeAltitudeAck.
+GO_HOME_ALTITUDE_READ = Layout((_f("hash", "I", "", "GO_HOME_ALTITUDE_HASH"),))
 _GO_HOME_ACK_FIELDS = (_f("ack", "B", "", "0 written"), _f("hash", "I"), _f("altitude", "H", "m"))
 GO_HOME_ALTITUDE_ACKS = (
     Layout(_GO_HOME_ACK_FIELDS),
@@ -772,6 +776,12 @@ _SPECS: tuple[CommandSpec, ...] = (
     _spec(
         "kill_switch", 0x01, 0x06, (KILL_SWITCH,), (U16_ACK,), firmware="new", section=_NOTES_CTL,
         doc="FW >= 3.3; stops motors: a last resort, never on a mere link loss",
+    ),
+    _spec(
+        "go_home_altitude_read", 0x01, 0x41, (GO_HOME_ALTITUDE_READ,), GO_HOME_ALTITUDE_ACKS, PARAM_ACK,
+        firmware="new", fixed=types.MappingProxyType({"hash": GO_HOME_ALTITUDE_HASH}),
+        section="OSDK 3.9 dji_flight_assistant_module (parameterRead 0x01 0x41)",
+        doc="read the go-home altitude (m above take-off); ACK {ret, hash, value held}",
     ),
     _spec(
         "go_home_altitude_write", 0x01, 0x42, (GO_HOME_ALTITUDE_WRITE,), GO_HOME_ALTITUDE_ACKS, PARAM_ACK,

@@ -46,8 +46,9 @@ Choices where the protocol is silent (also next to the code that makes them):
 * ``rc_takeover()`` always pushes ``0x02 0x01`` (reason 4) on an ACK-required session (resent
   0.5 s x 2 until the host ACKs), revokes SDK control, flips the RC switch to P and hovers.
 * Releasing control does not stop a running mission; landing and go home cancel it.
-* The go-home altitude (``go_home_altitude_m``, 20 m by default) is written with ``0x01 0x42`` (new
-  firmware; the value only, hash-checked); go home climbs to it (or stays higher) before flying home.
+* The go-home altitude (``go_home_altitude_m``, 20 m by default) is written with ``0x01 0x42`` and read
+  with ``0x01 0x41`` (new firmware; hash-checked: another hash gets ret code 1); go home climbs to it
+  (or stays higher) before flying home.
 
 Flight model: a point mass with a 4 m/s^2 acceleration limit on a flat earth around ``home``
 (north/east metres; latitude = home + north / R, longitude = home + east / (R cos(home lat)),
@@ -175,6 +176,7 @@ _BAD_PAYLOAD_ACK: dict[str, int] = {
     "set_broadcast_frequency": 0x0001,
     "flight_task": 10,
     "go_home_altitude_write": 1,  # another hash or length: not written (not confirmed on hardware)
+    "go_home_altitude_read": 1,  # another hash: not a parameter this FC knows (not confirmed on hardware)
 } | sub.BAD_PAYLOAD_ACK
 _GS_INVALID = 0xF4
 
@@ -694,6 +696,11 @@ class OsdkFcModel:
             self.go_home_altitude_m = float(f["altitude"])
         held = round(self.go_home_altitude_m)
         return {"ack": 0 if ok else 1, "hash": f["hash"], "altitude": held}
+
+    def _on_go_home_altitude_read(self, f: dict[str, Any], now: float) -> dict[str, Any]:
+        """0x01 0x41 with the go-home altitude's hash: the value held (what 0x01 0x42 wrote, or the
+        configured ``go_home_altitude_m``), in the write's ACK layout."""
+        return {"ack": 0, "hash": f["hash"], "altitude": round(self.go_home_altitude_m)}
 
     def _exit(self, task: str) -> int:
         if self.task != task:
