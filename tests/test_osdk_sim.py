@@ -446,6 +446,45 @@ def test_movement_control_moves_holds_the_set_point_and_the_brake_stops() -> Non
     assert m.speed < 0.01
 
 
+def _flying_north(host: FakeHost, speed: float) -> None:
+    host.takeoff()
+    host.send("movement_control", {"flag": control_flag(), "x": speed, "y": 0.0, "z": 0.0, "yaw": 0.0})
+
+
+def test_setpoint_hold_inf_holds_the_last_set_point_for_ever() -> None:
+    """The default (and the worst case a gateway must survive): one frame, and the FC flies on."""
+    host = FakeHost(OsdkFcModel(app_id=APP_ID), dt=0.1)
+    assert host.model.setpoint_hold == math.inf
+    _flying_north(host, 4.0)
+    host.run(120.0)  # two minutes of model time after the only frame
+    m = host.model
+    assert m.task == "sdk" and m.vn == pytest.approx(4.0, abs=0.01) and m.n > 450.0
+
+
+def test_setpoint_hold_seconds_brakes_and_hovers_after_the_last_frame() -> None:
+    host = FakeHost(OsdkFcModel(app_id=APP_ID, setpoint_hold=0.5))
+    m = host.model
+    _flying_north(host, 4.0)
+    frame = {"flag": control_flag(), "x": 4.0, "y": 0.0, "z": 0.0, "yaw": 0.0}
+    for _ in range(50):  # streamed at 10 Hz: held, whatever the hold time
+        host.run(0.1)
+        host.send("movement_control", frame)
+    assert m.task == "sdk" and m.vn == pytest.approx(4.0, abs=0.01)
+    host.run(0.48)  # just under the hold time after the last frame: still flying
+    assert m.task == "sdk" and m.vn == pytest.approx(4.0, abs=0.01)
+    host.run(0.04)  # past it: the FC brakes (4 m/s^2) and hovers where it stops
+    assert m.task == "hover"
+    host.run(1.5)
+    stopped = (m.n, m.e, m.u)
+    host.run(3.0)
+    assert m.speed < 0.01 and math.dist(stopped, (m.n, m.e, m.u)) < 0.05
+    status = host.latest("status")
+    assert status is not None and status["display_mode"] == 6  # P-GPS hover, no longer SDK control (17)
+    host.send("movement_control", frame)  # a new frame flies again
+    host.run(0.3)
+    assert m.task == "sdk" and m.vn > 1.0
+
+
 # ----------------------------------------------------------------------------------------------------
 # waypoint missions
 
@@ -887,7 +926,19 @@ def test_tcp_endpoint_serves_the_flight_controller() -> None:
 def test_main_prints_where_it_listens_and_stops_on_sigterm() -> None:
     code = "import sys; from adapters.osdk.sim import main; sys.exit(main(sys.argv[1:]))"
     proc = subprocess.Popen(
-        [sys.executable, "-c", code, "--tcp", "0", "--app-id", "7", "--home", "48.85,2.35"],
+        [
+            sys.executable,
+            "-c",
+            code,
+            "--tcp",
+            "0",
+            "--app-id",
+            "7",
+            "--home",
+            "48.85,2.35",
+            "--setpoint-hold",
+            "0.5",
+        ],
         cwd=ROOT,
         stdout=subprocess.PIPE,
         text=True,
@@ -897,6 +948,7 @@ def test_main_prints_where_it_listens_and_stops_on_sigterm() -> None:
         assert proc.stdout is not None
         first = proc.stdout.readline().strip()
         assert first.startswith("OSDK flight controller simulator at socket://127.0.0.1:")
+        assert "set-points held 0.5 s" in proc.stdout.readline()
         host = SerialHost(first.rsplit(" ", 1)[1])
         try:
             assert host.request("activate", {"app_id": 7})["ack"] == 0
@@ -918,3 +970,11 @@ def test_main_prints_where_it_listens_and_stops_on_sigterm() -> None:
 def test_main_rejects_a_bad_home() -> None:
     with pytest.raises(SystemExit):
         main(["--home", "95,10"])
+
+
+@pytest.mark.parametrize("hold", ["0", "-1", "nan", "forever"])
+def test_main_rejects_a_bad_setpoint_hold(hold: str) -> None:
+    with pytest.raises(SystemExit):
+        main(["--setpoint-hold", hold])
+    with pytest.raises(ValueError, match="setpoint_hold"):
+        OsdkFcModel(setpoint_hold=float(hold) if hold != "forever" else -math.inf)

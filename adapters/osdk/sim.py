@@ -24,9 +24,12 @@ Choices where the protocol is silent (also next to the code that makes them):
   push runs before activation too (the link is visibly alive).
 * Flight tasks without control authority: u16 ``0xFF02`` (``CommonACK::NO_RIGHTS_ERROR``); not
   confirmed on hardware. Mission starts without it: ``0xD1`` (OSDK ``OBTAIN_CONTROL_REQUIRED``).
-* Movement control holds the last set-point until another arrives (the FC has no documented hold
-  time; the gateway runs its own watchdog). It acts only in the air, under SDK control, while no
-  automatic task (take-off, landing, go home, mission) runs.
+* Movement control holds the last set-point for ``setpoint_hold`` seconds after the last movement
+  frame (``--setpoint-hold SECONDS|inf``), then brakes and hovers (task "hover", display mode 6).
+  What a real A3/N3 does is not documented (the protocol has no heartbeat and no documented hold
+  time), so the default is the worst case, ``inf``: the set-point is held until another arrives, and
+  the gateway must stop the aircraft itself (its own watchdog); tests run both kinds. It acts only in
+  the air, under SDK control, while no automatic task (take-off, landing, go home, mission) runs.
 * The emergency brake stops whatever the SDK started (movement, go home, landing, missions; no
   "finished" event), decelerates at the normal limit and holds where it stopped.
 * A waypoint mission started on the ground takes off first (motors on, the 1.2 m automatic take-off)
@@ -252,6 +255,7 @@ class _SetPoint:
     y: float
     z: float
     yaw: float
+    at: float  # when it arrived (model time): held for ``setpoint_hold`` seconds after it
     target_ne: tuple[float, float] | None = None  # position-offset mode: absolute target
 
 
@@ -290,11 +294,14 @@ class OsdkFcModel:
         version_layout: str | None = None,
         serial: str | None = None,
         firmware: str = "new",
+        setpoint_hold: float = math.inf,
     ) -> None:
         if unactivated not in ("ack", "ignore"):
             raise ValueError("unactivated must be 'ack' or 'ignore'")
         if firmware not in ("new", "m100"):
             raise ValueError("firmware must be 'new' or 'm100'")
+        if not setpoint_hold > 0:
+            raise ValueError("setpoint_hold must be a positive number of seconds or math.inf")
         #: "new" (A3/N3/M600/M210, OSDK 3.x) or "m100" (legacy codes, status values and telemetry layout)
         self.firmware = firmware
         legacy = firmware == "m100"
@@ -320,6 +327,9 @@ class OsdkFcModel:
         self.min_waypoints = min_waypoints
         self.max_altitude_m, self.min_altitude_m = max_altitude_m, min_altitude_m
         self.go_home_altitude_m = go_home_altitude_m
+        #: seconds a movement-control set-point is held without a new frame, then brake and hover (inf:
+        #: held until the next one; what a real FC does is not documented, module docstring)
+        self.setpoint_hold = setpoint_hold
         self.reach_pre_action_events = reach_pre_action_events
         self.lost_authority_mode = lost_authority_mode
         self.version_name = version_name
@@ -735,7 +745,7 @@ class OsdkFcModel:
         if not self._movement_allowed():
             return  # ignored: on the ground, without authority, or an automatic task runs
         parts = split_control_flag(f["flag"])
-        sp = _SetPoint(parts, f["x"], f["y"], f["z"], f["yaw"])
+        sp = _SetPoint(parts, f["x"], f["y"], f["z"], f["yaw"], now)
         if parts["horizontal"] == HORIZONTAL_POSITION:
             dn, de = self._frame_to_ne(parts["frame"], f["x"], f["y"])
             sp.target_ne = (self.n + dn, self.e + de)
@@ -1119,6 +1129,9 @@ class OsdkFcModel:
         sp = self._sp
         if sp is None:
             return 0.0, 0.0, 0.0
+        if self._t - sp.at >= self.setpoint_hold:  # no new frame for that long: brake, then hold
+            self._enter_hover(None)
+            return self._fly_hover()
         hor, ver = sp.parts["horizontal"], sp.parts["vertical"]
         if hor == HORIZONTAL_VELOCITY:
             vn, ve = self._frame_to_ne(sp.parts["frame"], sp.x, sp.y)
@@ -1583,6 +1596,16 @@ def _latlon(text: str) -> tuple[float, float]:
     return lat, lon
 
 
+def _hold_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError("expected a number of seconds or 'inf'") from None
+    if not value > 0:  # also refuses nan
+        raise argparse.ArgumentTypeError("the hold time must be positive (or 'inf')")
+    return value
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``dji-gateway simulate osdk``: a flight controller on a pty (default) or a loopback TCP port."""
     p = argparse.ArgumentParser(prog="dji-gateway simulate osdk", description=__doc__.split("\n\n")[0])
@@ -1596,6 +1619,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--rc-mode", choices=("F", "P", "A"), default="F", help="RC mode switch (default F)")
     p.add_argument("--max-distance", type=float, default=2000.0, help="waypoint limit from home, m")
     p.add_argument(
+        "--setpoint-hold",
+        type=_hold_seconds,
+        default=math.inf,
+        metavar="SECONDS|inf",
+        help="how long a movement-control set-point is held without a new frame before the FC brakes "
+        "and hovers (default inf: held until the next; a real FC's hold time is not documented)",
+    )
+    p.add_argument(
         "--firmware",
         choices=("new", "m100"),
         default="new",
@@ -1608,6 +1639,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         rc_mode=ns.rc_mode,
         max_distance_m=ns.max_distance,
         firmware=ns.firmware,
+        setpoint_hold=ns.setpoint_hold,
     )
     device = OsdkFcDevice(model)
     stop = threading.Event()
@@ -1625,7 +1657,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     app = "any app id" if ns.app_id is None else f"app id {ns.app_id}"
     print(
         f"gateway port: {place} (activation accepts {app}; home {ns.home[0]},{ns.home[1]}; "
-        f"firmware {ns.firmware})",
+        f"firmware {ns.firmware}; set-points held {ns.setpoint_hold:g} s)",
         flush=True,
     )
     with contextlib.suppress(KeyboardInterrupt):
