@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import re
 import struct
 from typing import Any
@@ -32,7 +33,7 @@ from adapters.osdk.commands import (
     spec_for,
 )
 from adapters.osdk.protocol import SessionMode, decode_frame, encode_ack, encode_command
-from adapters.wire.layout import LayoutError
+from adapters.wire.layout import Field, Layout, LayoutError
 from adapters.wire.table import Delivery
 
 ALL_SPECS: list[CommandSpec] = [s for specs in TABLE.values() for s in specs]
@@ -40,6 +41,10 @@ ALL_SPECS: list[CommandSpec] = [s for specs in TABLE.values() for s in specs]
 
 def _id(spec: CommandSpec) -> str:
     return f"{spec.name}-{spec.variant or 'any'}"
+
+
+def _fields(spec: CommandSpec) -> list[Field]:
+    return [f for codec in spec.request if isinstance(codec, Layout) for f in codec.fields]
 
 
 def _firmwares(spec: CommandSpec) -> list[str]:
@@ -475,6 +480,22 @@ def test_go_home_altitude_write_bytes() -> None:
         decode_request(0x01, 0x42, bytes.fromhex("01000000 3c00"))
     with pytest.raises(UnknownCommandError, match="does not exist on firmware 'm100'"):
         spec_for("go_home_altitude_write", "m100")
+
+
+@pytest.mark.parametrize("spec", [s for s in ALL_SPECS if any(f.is_float for f in _fields(s))], ids=_id)
+def test_no_float_field_is_written_as_negative_zero(spec: CommandSpec) -> None:
+    """-0.0 in (a negated zero stick, a computed velocity at rest) goes out as +0.0: the decoded bytes
+    carry no sign bit on a zero."""
+    for codec in spec.request:
+        if not isinstance(codec, Layout):
+            continue
+        values = codec.example() | {f.name: -0.0 if f.count == 1 else [-0.0] * f.count for f in codec.fields
+                                    if f.is_float}  # fmt: skip
+        decoded = codec.decode(codec.encode(values | {k: v for k, v in spec.fixed.items()}))
+        for f in codec.fields:
+            if f.is_float and f.name not in spec.fixed:
+                for v in decoded[f.name] if f.count > 1 else [decoded[f.name]]:
+                    assert v == 0.0 and math.copysign(1.0, v) == 1.0, (f.name, v)
 
 
 def test_go_home_altitude_read_bytes() -> None:
