@@ -274,7 +274,11 @@ class AircraftAdapter(SupervisedAdapter):
     # -- movement control (used by DRC) ------------------------------------------------------------
     def send_movement(self, forward: float, right: float, up: float, yaw_rate: float) -> None:
         """One 0x01 0x03 frame: body-frame velocities (m/s) and yaw rate (°/s), stable bit set, on
-        session 0 (no ACK). Raises LinkError when the link is down."""
+        session 0 (no ACK); nothing while the adapter does not hold control (never obtained, released,
+        or taken back by the RC): the aircraft is no longer ours to steer, so a shutdown after a
+        release sends no zero-velocity frames. A link that is down drops the frame."""
+        if not self.has_control:
+            return
         flag = cmds.control_flag(
             cmds.HORIZONTAL_VELOCITY, cmds.VERTICAL_VELOCITY, cmds.YAW_RATE, cmds.FRAME_BODY, stable=True
         )
@@ -283,6 +287,8 @@ class AircraftAdapter(SupervisedAdapter):
             self._fire("movement_control", fields)
 
     def emergency_brake(self) -> None:
+        if not self.has_control:  # as send_movement: no control frame to an aircraft we do not control
+            return
         with contextlib.suppress(LinkError):
             self._fire("emergency_brake", {})
 
