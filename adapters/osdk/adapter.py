@@ -1058,7 +1058,7 @@ class AircraftAdapter(SupervisedAdapter):
     async def _ext_release(self, data: EmptyRequest) -> CallResult:
         await self.obtain_control(0)
         if self._sink is not None:
-            self._sink.authority_lost(self.info.sn)
+            self._sink.authority_lost(self.info.sn, requested=True)  # the cloud's release, no take-over
         return CallResult()
 
 
