@@ -130,8 +130,9 @@ class TelemetrySink(Protocol):
 
     def online_changed(self, sn: str, online: bool) -> None: ...
 
-    def authority_lost(self, sn: str) -> None:
-        """The device took flight control back (RC take-over): the cloud no longer holds it."""
+    def authority_lost(self, sn: str, *, requested: bool = False) -> None:
+        """The cloud no longer holds flight control: the device took it back (an RC take-over), or
+        ``requested``: it was released because the cloud asked (e.g. ``x_osdk_authority_release``)."""
         ...
 
 

@@ -174,11 +174,14 @@ class Northbound:
         if online and adapter is not None:  # what it is (firmware, authority) as soon as it is there
             self.publish_state(adapter)
 
-    def authority_lost(self, sn: str) -> None:
+    def authority_lost(self, sn: str, *, requested: bool = False) -> None:
         auth = self.devices.authority
         if sn in auth.flight:
             auth.flight.discard(sn)
-            log.warning("device %s took flight authority back", sn)
+            if requested:
+                log.info("device %s: flight authority released, as the cloud asked", sn)
+            else:
+                log.warning("device %s took flight authority back", sn)
             adapter = self.devices.by_sn(sn)
             if adapter is not None:
                 self.publish_state(adapter)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import threading
 import time
 from collections.abc import Iterator
@@ -13,6 +14,8 @@ from typing import Any
 
 import pytest
 
+from adapters.osdk import commands as cmds
+from adapters.osdk.protocol import Decoder, Frame
 from adapters.osdk.sim import OsdkFcDevice, OsdkFcModel
 from adapters.simio import PtyEndpoint
 from gateway.local_broker import LocalBroker
@@ -30,6 +33,25 @@ def _setpoint(fc: OsdkFcDevice) -> tuple[float, float] | None:
     return fc.inspect(lambda m: None if m._sp is None else (m._sp.x, m._sp.y))
 
 
+class WireTap(OsdkFcDevice):
+    """The simulated FC, with every host frame also decoded here from the bytes that crossed the pty."""
+
+    def __init__(self, model: OsdkFcModel) -> None:
+        super().__init__(model)
+        self._tap = Decoder()
+        self.frames: list[Frame] = []
+
+    def on_bytes(self, data: bytes, now: float) -> bytes:
+        with self.lock:
+            self.frames += [f for f in self._tap.feed(data) if isinstance(f, Frame)]
+        return super().on_bytes(data, now)
+
+    def movement(self) -> list[dict[str, Any]]:
+        with self.lock:
+            frames = [f for f in self.frames if not f.is_ack and (f.cmd_set, f.cmd_id) == (0x01, 0x03)]
+        return [cmds.decode_request(0x01, 0x03, f.payload).fields for f in frames]
+
+
 DRC_USER, DRC_PASSWORD = "drc-pilot", "drc-aircraft-secret-31f"
 
 
@@ -37,7 +59,7 @@ DRC_USER, DRC_PASSWORD = "drc-pilot", "drc-aircraft-secret-31f"
 def rig(private_broker: LocalBroker) -> Iterator[dict[str, Any]]:
     """The cloud's broker, plus a DRC broker with username/password that drc_mode_enter names."""
     drc_broker = LocalBroker(users={DRC_USER: DRC_PASSWORD}).start()
-    fc = OsdkFcDevice(OsdkFcModel())
+    fc = WireTap(OsdkFcModel())
     pty = PtyEndpoint(fc).start()
     settings = gateway_settings(
         private_broker.port,
@@ -94,6 +116,12 @@ def test_sticks_fly_the_aircraft_and_stopping_them_brakes(rig: dict[str, Any]) -
     )
     assert zero_at - last < 0.5 + 0.04 + 0.3
     wait_until(lambda: fc.inspect(lambda m: m.speed) < 0.3, 5, what="braked to a hover")
+    # no -0.0 on the wire: the stick's absent x (seed: +x left) becomes right = -x, a negated zero that
+    # used to go out as 00 00 00 80; every float of every movement frame, decoded from the bytes
+    frames = fc.movement()
+    assert any(f["x"] == 3.0 and f["y"] == 0.0 for f in frames) and any(f["x"] == 0.0 for f in frames)
+    signs = {(k, math.copysign(1.0, v)) for f in frames for k, v in f.items() if k != "flag" and v == 0.0}
+    assert signs and all(sign == 1.0 for _, sign in signs), signs
     assert rig["cloud"].service("drc_mode_exit", {})["data"]["result"] == 0
     rig["cloud"].wait_for(
         "events", lambda b: b["method"] == "drc_status_notify" and b["data"]["drc_state"] == 0

@@ -4,13 +4,17 @@ progress events and osd."""
 
 from __future__ import annotations
 
+import asyncio
+import logging
 import math
 import time
 from collections.abc import Iterator
 from typing import Any
 
 import pytest
+import serial
 
+from adapters.osdk.protocol import encode_command
 from adapters.osdk.sim import OsdkFcDevice, OsdkFcModel
 from adapters.simio import PtyEndpoint
 from gateway.local_broker import LocalBroker
@@ -45,7 +49,7 @@ def rig(broker: LocalBroker) -> Iterator[dict[str, Any]]:
     gw = GatewayThread(settings).start()
     try:
         cloud.wait_for("status", lambda b: [d["sn"] for d in b["data"]["sub_devices"]] == [SN], timeout=10)
-        yield {"fc": device, "cloud": cloud, "gw": gw, "adapter": gw.app.devices.by_sn(SN)}
+        yield {"fc": device, "cloud": cloud, "gw": gw, "adapter": gw.app.devices.by_sn(SN), "pty": pty}
     finally:
         gw.stop()
         cloud.close()
@@ -231,17 +235,52 @@ def test_takeoff_fly_to_and_stop(rig: dict[str, Any]) -> None:
     assert fc.inspect(lambda m: math.hypot(m.n, m.e)) > 5.0  # stopped short of home
 
 
-def test_rc_takeover_drops_authority(rig: dict[str, Any]) -> None:
+def test_rc_takeover_drops_authority(rig: dict[str, Any], caplog: pytest.LogCaptureFixture) -> None:
     fc, cloud = rig["fc"], rig["cloud"]
+    caplog.set_level(logging.INFO, logger="gateway.northbound")
     assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
     cloud.wait_for(f"{SN}/state", lambda b: b["data"].get("control_source") == "A")
     fc.rc_takeover()
     event = cloud.wait_for("events", lambda b: b.get("method") == "joystick_invalid_notify")[0]
     assert event["data"] == {"reason": 4} and event["need_reply"] == 1
     cloud.wait_for(f"{SN}/state", lambda b: b["data"].get("control_source") == "")
+    # an RC take-over keeps its wording (a WARNING: someone else now flies the aircraft)
+    lost = [r for r in caplog.records if r.name == "gateway.northbound" and "authority" in r.getMessage()]
+    assert [(r.levelno, r.getMessage()) for r in lost] == [
+        (logging.WARNING, f"device {SN} took flight authority back")
+    ]
     # with the RC in P mode the flight controller refuses to hand control back
     r = cloud.service("flight_authority_grab", {})
     assert r["data"]["result"] == 319030 and "RC" in r["data"]["output"]["reason"]
+
+
+def test_after_a_release_no_control_frame_is_sent_and_the_log_says_released(
+    rig: dict[str, Any], caplog: pytest.LogCaptureFixture
+) -> None:
+    """Issue #31: on shutdown after the cloud released authority the gateway still sent two zero-velocity
+    ``01 03`` frames (the app's stop and the adapter's own) to an aircraft it no longer controlled, and
+    the release was logged as the device having "took flight authority back"."""
+    fc, cloud, gw, adapter = rig["fc"], rig["cloud"], rig["gw"], rig["adapter"]
+    caplog.set_level(logging.INFO, logger="gateway.northbound")
+    moves = lambda: fc.inspect(lambda m: m.actions["movement_control"])  # noqa: E731 (every 01 03 frame decoded)
+    assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
+    before = moves()
+    asyncio.run_coroutine_threadsafe(adapter.stop_motion(), gw.loop).result(5)  # while in control: sent
+    wait_until(lambda: moves() == before + 1, 5, what="the stop's zero-velocity frame while in control")
+    assert cloud.service("x_osdk_authority_release", {})["data"]["result"] == 0
+    assert not fc.inspect(lambda m: m.sdk_control)
+    cloud.wait_for(f"{SN}/state", lambda b: b["data"].get("control_source") == "")
+    released = moves()
+    gw.stop()  # the shutdown: the app's stop_motion, then the adapter's stop
+    # a marker after the gateway's last byte on the same pty: once the FC has read it, it has read all
+    with serial.serial_for_url(rig["pty"].path, baudrate=230400, timeout=0.1) as port:
+        port.write(encode_command(0x00, 0x00, b"\x00", 2, 4242))
+        seen = fc.inspect(lambda m: m.actions["get_version"])
+        wait_until(lambda: fc.inspect(lambda m: m.actions["get_version"]) > seen, 5, what="the marker")
+    assert moves() == released  # no 01 03 after the release, none at shutdown
+    logged = [(r.levelno, r.getMessage()) for r in caplog.records if r.name == "gateway.northbound"]
+    assert (logging.INFO, f"device {SN}: flight authority released, as the cloud asked") in logged
+    assert not any("took flight authority back" in text for _, text in logged)
 
 
 def test_ack_loss_is_retransmitted_and_acted_on_once(rig: dict[str, Any]) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import re
 import struct
 from typing import Any
@@ -32,7 +33,7 @@ from adapters.osdk.commands import (
     spec_for,
 )
 from adapters.osdk.protocol import SessionMode, decode_frame, encode_ack, encode_command
-from adapters.wire.layout import LayoutError
+from adapters.wire.layout import Field, Layout, LayoutError
 from adapters.wire.table import Delivery
 
 ALL_SPECS: list[CommandSpec] = [s for specs in TABLE.values() for s in specs]
@@ -40,6 +41,10 @@ ALL_SPECS: list[CommandSpec] = [s for specs in TABLE.values() for s in specs]
 
 def _id(spec: CommandSpec) -> str:
     return f"{spec.name}-{spec.variant or 'any'}"
+
+
+def _fields(spec: CommandSpec) -> list[Field]:
+    return [f for codec in spec.request if isinstance(codec, Layout) for f in codec.fields]
 
 
 def _firmwares(spec: CommandSpec) -> list[str]:
@@ -125,6 +130,7 @@ def test_table_keys_and_session_rules() -> None:
         ("subscribe_remove_package", [1], [1]),
         ("subscription_data_push", [None], []),
         ("go_home_altitude_write", [6], [7, 13]),
+        ("go_home_altitude_read", [4], [7, 13]),
     ],
 )
 def test_packed_sizes(name: str, sizes: list[int], ack_sizes: list[int | None]) -> None:
@@ -386,6 +392,26 @@ def test_version_reply_in_each_firmware_layout() -> None:
     assert decode_ack("get_version", A3_REPLY).fields == {"ack": 0, "version_data": A3_REPLY[2:]}
 
 
+# The M100 on firmware 3.1.10.0 (what DJI's Onboard-SDK 3.x accepts): u16 ack, u32 CRC, the ID and its NUL
+# (together at most 16 bytes, the library's buffer), the name with the third number a tenth of the real one.
+M100_31_REPLY = (
+    b"\x00\x00" + b"\xee\x48\x1b\xce" + b"SIMFC00001\x00" + b"SDK-v1.1 BETA M100-03.01.01.00".ljust(32, b"\0")
+)
+
+
+def test_the_m100_3_1_reply_and_what_the_library_cannot_read() -> None:
+    m100 = parse_version_reply(*_ack_and_body(M100_31_REPLY))
+    assert (m100.layout, m100.version_crc, m100.serial) == ("crc_id", 0xCE1B48EE, "SIMFC00001")
+    assert (m100.hardware, m100.firmware) == ("M100", "03.01.01.00")
+    kw: dict[str, Any] = {"layout": "crc_id", "serial": "SIMFC00001", "version_crc": 0xCE1B48EE}
+    assert encode_version_reply(0, m100.name, **kw) == M100_31_REPLY
+    # the library reads CRC + ID up to the first NUL: a zero CRC byte would cut it, a long ID overflow it
+    with pytest.raises(ValueError, match="zero byte"):
+        encode_version_reply(0, m100.name, layout="crc_id", serial="SIMFC00001", version_crc=0xCE1B00EE)
+    with pytest.raises(ValueError, match="longer"):
+        encode_version_reply(0, m100.name, layout="crc_id", serial="SIMFC0000001", version_crc=0xCE1B48EE)
+
+
 def test_a_version_reply_that_fits_no_layout_is_an_error() -> None:
     with pytest.raises(ValueError, match="ID"):
         parse_version_reply(0, b"X" * 40)  # no NUL, no name
@@ -454,6 +480,39 @@ def test_go_home_altitude_write_bytes() -> None:
         decode_request(0x01, 0x42, bytes.fromhex("01000000 3c00"))
     with pytest.raises(UnknownCommandError, match="does not exist on firmware 'm100'"):
         spec_for("go_home_altitude_write", "m100")
+
+
+@pytest.mark.parametrize("spec", [s for s in ALL_SPECS if any(f.is_float for f in _fields(s))], ids=_id)
+def test_no_float_field_is_written_as_negative_zero(spec: CommandSpec) -> None:
+    """-0.0 in (a negated zero stick, a computed velocity at rest) goes out as +0.0: the decoded bytes
+    carry no sign bit on a zero."""
+    for codec in spec.request:
+        if not isinstance(codec, Layout):
+            continue
+        values = codec.example() | {f.name: -0.0 if f.count == 1 else [-0.0] * f.count for f in codec.fields
+                                    if f.is_float}  # fmt: skip
+        decoded = codec.decode(codec.encode(values | {k: v for k, v in spec.fixed.items()}))
+        for f in codec.fields:
+            if f.is_float and f.name not in spec.fixed:
+                for v in decoded[f.name] if f.count > 1 else [decoded[f.name]]:
+                    assert v == 0.0 and math.copysign(1.0, v) == 1.0, (f.name, v)
+
+
+def test_go_home_altitude_read_bytes() -> None:
+    # DJI Onboard-SDK 3.9 FlightAssistant::getGoHomeAltitude: 0x01 0x41 (parameterRead), the u32 hash alone;
+    # the ACK is the write's: {u8 ret, u32 hash, u16 value} or the value padded to 8 bytes
+    assert encode_request("go_home_altitude_read") == bytes.fromhex("dc63cc38")
+    assert decode_request(0x01, 0x41, bytes.fromhex("dc63cc38")).fields == {"hash": c.GO_HOME_ALTITUDE_HASH}
+    ack = c.decode_ack("go_home_altitude_read", bytes.fromhex("00 dc63cc38 1400"))
+    assert ack.fields == {"ack": 0, "hash": 952919004, "altitude": 20}
+    assert (
+        c.decode_ack("go_home_altitude_read", bytes.fromhex("00 dc63cc38 1400") + bytes(6)).fields["altitude"]
+        == 20
+    )
+    with pytest.raises(LayoutError):  # USE_RTK_DATA's hash: another parameter
+        decode_request(0x01, 0x41, (1288992843).to_bytes(4, "little"))
+    with pytest.raises(UnknownCommandError, match="does not exist on firmware 'm100'"):
+        spec_for("go_home_altitude_read", "m100")
 
 
 def test_kill_switch_layout() -> None:

@@ -232,6 +232,62 @@ def test_activation_gates_every_other_command_set() -> None:
     assert host.request("obtain_control", {"control": 1})["ack"] == 0x0002
 
 
+def _library_reads_version(reply: bytes) -> tuple[str, tuple[int, int, int, int], int, str] | None:
+    """What DJI's Onboard-SDK 3.x makes of a 0x00 0x00 reply (``Vehicle::parseDroneVersionInfo``, 3.8.1 and
+    3.9.0, re-told step by step): (hardware, firmware, version CRC, serial), or None where it gives up."""
+    at = 2
+    crc_id = bytearray()
+    while reply[at] != 0:  # CRC and/or ID up to the first NUL, at most 16 bytes
+        crc_id.append(reply[at])
+        at += 1
+        if at > 18:
+            return None
+    at += 1
+    name = reply[at : at + 32]
+    words = name.split(b" ", 2)  # "SDK-v1.x" "BETA" "<hardware>-<a>.<b>.<c>.<d>"
+    if len(words) < 3 or b"-" not in words[2]:
+        return None
+    hardware, _, numbers = words[2].partition(b"-")
+    parts = numbers.split(b"\0", 1)[0].split(b".")
+    if len(parts) != 4:
+        return None
+    a, b, c, d = (int(p) for p in parts)
+    if hardware == b"M100" or (a, b, c, d) == (3, 2, 10, 0):
+        c *= 10  # "Bug in M100 does not report the right FW" (and M600/A3 3.2.10)
+    if (a, b, c, d) < (3, 2, 0, 0):
+        if len(crc_id) < 4 or len(crc_id) - 4 > 12:
+            return None
+        return hardware.decode(), (a, b, c, d), int.from_bytes(crc_id[:4], "little"), crc_id[4:].decode()
+    return hardware.decode(), (a, b, c, d), 0, crc_id.decode()
+
+
+M100_31 = (3, 1, 10, 0)  # OSDK Version::M100_31: the one M100 firmware the 3.x library runs on
+EXTENDED_VERSION_BASE = (3, 2, 36, 6)  # the library refuses anything else older ("Upgrade firmware")
+
+
+@pytest.mark.parametrize("firmware", ["new", "m100"])
+def test_version_reply_is_one_dji_onboard_sdk_3_accepts(firmware: str) -> None:
+    """The M100 simulator used to answer CRC + ``M100-02.03.00.00`` (the 2.3 protocol): the 3.x library
+    stopped at "Drone version not obtained". Now each firmware answers in the layout and with a version
+    that the library's own parsing accepts (checked by hand against the built library: docs/osdk.md)."""
+    host = FakeHost(OsdkFcModel(firmware=firmware))
+    raw, seq = host.frame("get_version", {"arbitrary": 0})
+    host.write(raw)
+    reply = host.ack_for(2, seq).data
+    read = _library_reads_version(reply)
+    assert read is not None
+    hardware, version, crc, serial = read
+    info = cmds.parse_version_reply(int.from_bytes(reply[:2], "little"), reply[2:])  # the gateway's reading
+    if firmware == "m100":
+        assert (hardware, version, serial) == ("M100", M100_31, "SIMFC00001")
+        assert crc != 0 and 0 not in crc.to_bytes(4, "little")
+        assert (info.layout, info.hardware, info.firmware) == ("crc_id", "M100", "03.01.01.00")
+        assert (info.version_crc, info.serial) == (crc, serial)
+    else:
+        assert hardware == "A3" and version >= EXTENDED_VERSION_BASE and serial == "SIMFC0000000001"
+        assert (info.layout, info.hardware, info.serial) == ("id", "A3", serial)
+
+
 def test_unactivated_ignore_policy_answers_nothing() -> None:
     host = FakeHost(OsdkFcModel(unactivated="ignore"))
     raw, seq = host.frame("wp_start_stop", {"start": 0})
@@ -388,6 +444,45 @@ def test_movement_control_moves_holds_the_set_point_and_the_brake_stops() -> Non
     )
     host.run(1.0)
     assert m.speed < 0.01
+
+
+def _flying_north(host: FakeHost, speed: float) -> None:
+    host.takeoff()
+    host.send("movement_control", {"flag": control_flag(), "x": speed, "y": 0.0, "z": 0.0, "yaw": 0.0})
+
+
+def test_setpoint_hold_inf_holds_the_last_set_point_for_ever() -> None:
+    """The default (and the worst case a gateway must survive): one frame, and the FC flies on."""
+    host = FakeHost(OsdkFcModel(app_id=APP_ID), dt=0.1)
+    assert host.model.setpoint_hold == math.inf
+    _flying_north(host, 4.0)
+    host.run(120.0)  # two minutes of model time after the only frame
+    m = host.model
+    assert m.task == "sdk" and m.vn == pytest.approx(4.0, abs=0.01) and m.n > 450.0
+
+
+def test_setpoint_hold_seconds_brakes_and_hovers_after_the_last_frame() -> None:
+    host = FakeHost(OsdkFcModel(app_id=APP_ID, setpoint_hold=0.5))
+    m = host.model
+    _flying_north(host, 4.0)
+    frame = {"flag": control_flag(), "x": 4.0, "y": 0.0, "z": 0.0, "yaw": 0.0}
+    for _ in range(50):  # streamed at 10 Hz: held, whatever the hold time
+        host.run(0.1)
+        host.send("movement_control", frame)
+    assert m.task == "sdk" and m.vn == pytest.approx(4.0, abs=0.01)
+    host.run(0.48)  # just under the hold time after the last frame: still flying
+    assert m.task == "sdk" and m.vn == pytest.approx(4.0, abs=0.01)
+    host.run(0.04)  # past it: the FC brakes (4 m/s^2) and hovers where it stops
+    assert m.task == "hover"
+    host.run(1.5)
+    stopped = (m.n, m.e, m.u)
+    host.run(3.0)
+    assert m.speed < 0.01 and math.dist(stopped, (m.n, m.e, m.u)) < 0.05
+    status = host.latest("status")
+    assert status is not None and status["display_mode"] == 6  # P-GPS hover, no longer SDK control (17)
+    host.send("movement_control", frame)  # a new frame flies again
+    host.run(0.3)
+    assert m.task == "sdk" and m.vn > 1.0
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -618,6 +713,27 @@ def test_a_truncated_frame_does_not_hold_back_the_next_one() -> None:
     assert (3, seq) in host.acks and host.model.bad_frames >= 1
 
 
+def test_go_home_altitude_read_answers_the_value_held() -> None:
+    """``01 41`` used to get the unknown-command 0xFF00; DJI's library (getGoHomeAltitudeSync) reads the
+    value from the write's ACK layout and wants its hash echoed."""
+    host = FakeHost()
+    host.activate_and_obtain()
+    raw, seq = host.frame("go_home_altitude_read")
+    host.write(raw)
+    ack = host.ack_for(2, seq).data
+    assert ack == bytes([0]) + cmds.GO_HOME_ALTITUDE_HASH.to_bytes(4, "little") + (20).to_bytes(2, "little")
+    assert host.request("go_home_altitude_write", {"altitude": 75})["ack"] == 0
+    assert host.request("go_home_altitude_read") == {
+        "ack": 0,
+        "hash": cmds.GO_HOME_ALTITUDE_HASH,
+        "altitude": 75,
+    }
+    assert host.model.actions["go_home_altitude_read"] == 2 and host.model.unknown_commands == 0
+    # another parameter's hash (USE_RTK_DATA): ret code 1, nothing else read
+    host.write(encode_command(0x01, 0x41, (1288992843).to_bytes(4, "little"), 2, 7))
+    assert host.ack_for(2, 7).data[0] == 1
+
+
 def test_bad_payloads_get_the_commands_invalid_code() -> None:
     host = FakeHost()
     host.request("activate", {"app_id": APP_ID})
@@ -810,7 +926,19 @@ def test_tcp_endpoint_serves_the_flight_controller() -> None:
 def test_main_prints_where_it_listens_and_stops_on_sigterm() -> None:
     code = "import sys; from adapters.osdk.sim import main; sys.exit(main(sys.argv[1:]))"
     proc = subprocess.Popen(
-        [sys.executable, "-c", code, "--tcp", "0", "--app-id", "7", "--home", "48.85,2.35"],
+        [
+            sys.executable,
+            "-c",
+            code,
+            "--tcp",
+            "0",
+            "--app-id",
+            "7",
+            "--home",
+            "48.85,2.35",
+            "--setpoint-hold",
+            "0.5",
+        ],
         cwd=ROOT,
         stdout=subprocess.PIPE,
         text=True,
@@ -820,6 +948,7 @@ def test_main_prints_where_it_listens_and_stops_on_sigterm() -> None:
         assert proc.stdout is not None
         first = proc.stdout.readline().strip()
         assert first.startswith("OSDK flight controller simulator at socket://127.0.0.1:")
+        assert "set-points held 0.5 s" in proc.stdout.readline()
         host = SerialHost(first.rsplit(" ", 1)[1])
         try:
             assert host.request("activate", {"app_id": 7})["ack"] == 0
@@ -841,3 +970,11 @@ def test_main_prints_where_it_listens_and_stops_on_sigterm() -> None:
 def test_main_rejects_a_bad_home() -> None:
     with pytest.raises(SystemExit):
         main(["--home", "95,10"])
+
+
+@pytest.mark.parametrize("hold", ["0", "-1", "nan", "forever"])
+def test_main_rejects_a_bad_setpoint_hold(hold: str) -> None:
+    with pytest.raises(SystemExit):
+        main(["--setpoint-hold", hold])
+    with pytest.raises(ValueError, match="setpoint_hold"):
+        OsdkFcModel(setpoint_hold=float(hold) if hold != "forever" else -math.inf)

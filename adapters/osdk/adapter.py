@@ -297,7 +297,11 @@ class AircraftAdapter(SupervisedAdapter):
     # -- movement control (used by DRC) ------------------------------------------------------------
     def send_movement(self, forward: float, right: float, up: float, yaw_rate: float) -> None:
         """One 0x01 0x03 frame: body-frame velocities (m/s) and yaw rate (°/s), stable bit set, on
-        session 0 (no ACK). Raises LinkError when the link is down."""
+        session 0 (no ACK); nothing while the adapter does not hold control (never obtained, released,
+        or taken back by the RC): the aircraft is no longer ours to steer, so a shutdown after a
+        release sends no zero-velocity frames. A link that is down drops the frame."""
+        if not self.has_control:
+            return
         flag = cmds.control_flag(
             cmds.HORIZONTAL_VELOCITY, cmds.VERTICAL_VELOCITY, cmds.YAW_RATE, cmds.FRAME_BODY, stable=True
         )
@@ -306,6 +310,8 @@ class AircraftAdapter(SupervisedAdapter):
             self._fire("movement_control", fields)
 
     def emergency_brake(self) -> None:
+        if not self.has_control:  # as send_movement: no control frame to an aircraft we do not control
+            return
         with contextlib.suppress(LinkError):
             self._fire("emergency_brake", {})
 
@@ -1311,7 +1317,7 @@ class AircraftAdapter(SupervisedAdapter):
     async def _ext_release(self, data: EmptyRequest) -> CallResult:
         await self.obtain_control(0)
         if self._sink is not None:
-            self._sink.authority_lost(self.info.sn)
+            self._sink.authority_lost(self.info.sn, requested=True)  # the cloud's release, no take-over
         return CallResult()
 
 

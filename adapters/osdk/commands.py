@@ -508,6 +508,13 @@ ACTIVATE = Layout(
 # The name reads "SDK-v1.1 BETA A3-03.03.100.00": the hardware after the second space up to '-', the
 # firmware version after it. The body is kept raw here and read by parse_version_reply / made by
 # encode_version_reply, because its ID field has no fixed length.
+# The library copies the CRC and the ID together into one 16-byte buffer, up to the first NUL (at most 16
+# bytes after the ack), and only then splits off the CRC when the firmware is older than 3.2: so in the
+# 3.1 layout the CRC bytes are never 0 and CRC + ID + NUL fit in 16 bytes (an ID of at most 11
+# characters; the 3.1-era library, Onboard-SDK 3.1.9 CoreAPI::getDroneVersion, reads an 11-byte ID).
+# An M100 on the firmware 3.x supports (3.1.10.0, Version::M100_31) writes its third number a tenth of
+# the real one: "M100-03.01.01.00"; the library multiplies it by 10 for hardware "M100". The names are
+# reported as sent (DroneVersion.firmware).
 VERSION_REPLY = Layout(
     (_f("ack", "H", "", "0 activated, 0xFF01 not activated"),),
     tail=Tail("version_data", "firmware-specific: [u32 CRC] [ID NUL] 32-byte version name"),
@@ -586,6 +593,10 @@ def encode_version_reply(
         return head + ident + b"\0" + raw_name
     crc = (version_crc & 0xFFFFFFFF).to_bytes(4, "little")
     if layout == "crc_id":
+        if 0 in crc:
+            raise ValueError(f"version CRC 0x{version_crc:08X} has a zero byte: it would end the ID early")
+        if len(crc) + len(ident) + 1 > VERSION_ID_MAX:
+            raise ValueError(f"ID {serial!r} longer than {VERSION_ID_MAX - 5} characters after the CRC")
         return head + crc + ident + b"\0" + raw_name
     if layout == "crc":
         return head + crc + raw_name
@@ -652,6 +663,10 @@ PARAM_ACK: dict[int, str] = {0: "written"}
 GO_HOME_ALTITUDE_WRITE = Layout(
     (_f("hash", "I", "", "GO_HOME_ALTITUDE_HASH"), _f("altitude", "H", "m", "go-home altitude, 20..500"))
 )
+# 0x01 0x41 parameter read by hash (FlightAssistant::readParameterByHash, getGoHomeAltitude): u32 hash only;
+# the ACK is the write's (u8 ret code, the hash, the value held). OSDK's sync read wants the hash echoed and
+# at most 13 bytes, its async decoder at least the 7 of GoHomeAltitudeAck.
+GO_HOME_ALTITUDE_READ = Layout((_f("hash", "I", "", "GO_HOME_ALTITUDE_HASH"),))
 _GO_HOME_ACK_FIELDS = (_f("ack", "B", "", "0 written"), _f("hash", "I"), _f("altitude", "H", "m"))
 GO_HOME_ALTITUDE_ACKS = (
     Layout(_GO_HOME_ACK_FIELDS),
@@ -761,6 +776,12 @@ _SPECS: tuple[CommandSpec, ...] = (
     _spec(
         "kill_switch", 0x01, 0x06, (KILL_SWITCH,), (U16_ACK,), firmware="new", section=_NOTES_CTL,
         doc="FW >= 3.3; stops motors: a last resort, never on a mere link loss",
+    ),
+    _spec(
+        "go_home_altitude_read", 0x01, 0x41, (GO_HOME_ALTITUDE_READ,), GO_HOME_ALTITUDE_ACKS, PARAM_ACK,
+        firmware="new", fixed=types.MappingProxyType({"hash": GO_HOME_ALTITUDE_HASH}),
+        section="OSDK 3.9 dji_flight_assistant_module (parameterRead 0x01 0x41)",
+        doc="read the go-home altitude (m above take-off); ACK {ret, hash, value held}",
     ),
     _spec(
         "go_home_altitude_write", 0x01, 0x42, (GO_HOME_ALTITUDE_WRITE,), GO_HOME_ALTITUDE_ACKS, PARAM_ACK,

@@ -24,9 +24,12 @@ Choices where the protocol is silent (also next to the code that makes them):
   push runs before activation too (the link is visibly alive).
 * Flight tasks without control authority: u16 ``0xFF02`` (``CommonACK::NO_RIGHTS_ERROR``); not
   confirmed on hardware. Mission starts without it: ``0xD1`` (OSDK ``OBTAIN_CONTROL_REQUIRED``).
-* Movement control holds the last set-point until another arrives (the FC has no documented hold
-  time; the gateway runs its own watchdog). It acts only in the air, under SDK control, while no
-  automatic task (take-off, landing, go home, mission) runs.
+* Movement control holds the last set-point for ``setpoint_hold`` seconds after the last movement
+  frame (``--setpoint-hold SECONDS|inf``), then brakes and hovers (task "hover", display mode 6).
+  What a real A3/N3 does is not documented (the protocol has no heartbeat and no documented hold
+  time), so the default is the worst case, ``inf``: the set-point is held until another arrives, and
+  the gateway must stop the aircraft itself (its own watchdog); tests run both kinds. It acts only in
+  the air, under SDK control, while no automatic task (take-off, landing, go home, mission) runs.
 * The emergency brake stops whatever the SDK started (movement, go home, landing, missions; no
   "finished" event), decelerates at the normal limit and holds where it stopped.
 * A waypoint mission started on the ground takes off first (motors on, the 1.2 m automatic take-off)
@@ -46,8 +49,9 @@ Choices where the protocol is silent (also next to the code that makes them):
 * ``rc_takeover()`` always pushes ``0x02 0x01`` (reason 4) on an ACK-required session (resent
   0.5 s x 2 until the host ACKs), revokes SDK control, flips the RC switch to P and hovers.
 * Releasing control does not stop a running mission; landing and go home cancel it.
-* The go-home altitude (``go_home_altitude_m``, 20 m by default) is written with ``0x01 0x42`` (new
-  firmware; the value only, hash-checked); go home climbs to it (or stays higher) before flying home.
+* The go-home altitude (``go_home_altitude_m``, 20 m by default) is written with ``0x01 0x42`` and read
+  with ``0x01 0x41`` (new firmware; hash-checked: another hash gets ret code 1); go home climbs to it
+  (or stays higher) before flying home.
 
 Flight model: a point mass with a 4 m/s^2 acceleration limit on a flat earth around ``home``
 (north/east metres; latitude = home + north / R, longitude = home + east / (R cos(home lat)),
@@ -110,7 +114,13 @@ EARTH_RADIUS_M = 6378137.0  # flat-earth approximation around home (module docst
 DEFAULT_HOME = (22.5431, 113.9580)  # degrees
 NOT_ACTIVATED_ACK = 0xFF01  # OSDK ErrorCode::CommonACK::NO_AUTHORIZATION_ERROR
 M100_TASK_STARTED, M100_TASK_FAILED = 0x0002, 0x0001  # M100 0x01 0x01 ACKs (FLIGHT_TASK_M100_ACK)
-M100_VERSION_NAME = "SDK-v1.0 BETA M100-02.03.00.00"  # an M100 on the legacy (2.3) protocol; illustrative
+#: An M100 on firmware 3.1.10.0 (OSDK ``Version::M100_31``, the only M100 firmware DJI's Onboard-SDK 3.x
+#: accepts), as it writes it: the third number a tenth of the real one (the library multiplies it by 10
+#: for "M100"). It answers in the 3.1 layout (u32 CRC, ID and its NUL, name): the seed-era "M100 2.3"
+#: reply (CRC + name, ``M100-02.03.00.00``) stops the 3.x library at "Drone version not obtained".
+M100_VERSION_NAME = "SDK-v1.1 BETA M100-03.01.01.00"
+#: The M100's ID after the CRC: 10 characters and the NUL (the 3.1-era library reads an 11-byte ID).
+M100_SERIAL = "SIMFC00001"
 NO_RIGHTS_ACK = 0xFF02  # OSDK ErrorCode::CommonACK::NO_RIGHTS_ERROR (flight task without authority)
 #: A command the simulated FC does not implement, asking for an answer: u16 OSDK
 #: ``ErrorCode::CommonACK::KEY_ERROR`` (0xFF00). Which code real firmware uses is not confirmed; what
@@ -169,6 +179,7 @@ _BAD_PAYLOAD_ACK: dict[str, int] = {
     "set_broadcast_frequency": 0x0001,
     "flight_task": 10,
     "go_home_altitude_write": 1,  # another hash or length: not written (not confirmed on hardware)
+    "go_home_altitude_read": 1,  # another hash: not a parameter this FC knows (not confirmed on hardware)
 } | sub.BAD_PAYLOAD_ACK
 _GS_INVALID = 0xF4
 
@@ -244,6 +255,7 @@ class _SetPoint:
     y: float
     z: float
     yaw: float
+    at: float  # when it arrived (model time): held for ``setpoint_hold`` seconds after it
     target_ne: tuple[float, float] | None = None  # position-offset mode: absolute target
 
 
@@ -280,20 +292,25 @@ class OsdkFcModel:
         lost_authority_mode: SessionMode = SessionMode.ACK_REQUIRED,
         version_name: str | None = None,
         version_layout: str | None = None,
-        serial: str = "SIMFC0000000001",
+        serial: str | None = None,
         firmware: str = "new",
+        setpoint_hold: float = math.inf,
     ) -> None:
         if unactivated not in ("ack", "ignore"):
             raise ValueError("unactivated must be 'ack' or 'ignore'")
         if firmware not in ("new", "m100"):
             raise ValueError("firmware must be 'new' or 'm100'")
+        if not setpoint_hold > 0:
+            raise ValueError("setpoint_hold must be a positive number of seconds or math.inf")
         #: "new" (A3/N3/M600/M210, OSDK 3.x) or "m100" (legacy codes, status values and telemetry layout)
         self.firmware = firmware
         legacy = firmware == "m100"
         if version_name is None:
             version_name = M100_VERSION_NAME if legacy else "SDK-v1.1 BETA A3-03.03.100.00"
         if version_layout is None:
-            version_layout = "crc" if legacy else "id"
+            version_layout = "crc_id" if legacy else "id"
+        if serial is None:
+            serial = M100_SERIAL if legacy else "SIMFC0000000001"
         self._item_names = tuple(it.name for it in TELEMETRY_ITEMS[firmware])
         self._flown = False  # an M100 reports "landed" (5), not "standby" (1), after a flight
         # configuration (plain attributes: tests change them between steps)
@@ -310,6 +327,9 @@ class OsdkFcModel:
         self.min_waypoints = min_waypoints
         self.max_altitude_m, self.min_altitude_m = max_altitude_m, min_altitude_m
         self.go_home_altitude_m = go_home_altitude_m
+        #: seconds a movement-control set-point is held without a new frame, then brake and hover (inf:
+        #: held until the next one; what a real FC does is not documented, module docstring)
+        self.setpoint_hold = setpoint_hold
         self.reach_pre_action_events = reach_pre_action_events
         self.lost_authority_mode = lost_authority_mode
         self.version_name = version_name
@@ -321,7 +341,8 @@ class OsdkFcModel:
         self.obstacle_sensors: set[str] = set()
         self.obstacle_range = 30.0
         self.version_layout = version_layout  # how 0x00 0x00 is answered: cmds.encode_version_reply
-        self.serial = serial  # the flight controller's ID string in the version reply (<= 15 characters)
+        # the flight controller's ID string in the version reply (<= 15 characters; <= 11 after a CRC)
+        self.serial = serial
         self.battery_capacity_mah = 4500
         # link
         self._decoder = Decoder()
@@ -568,9 +589,13 @@ class OsdkFcModel:
     # -- 0x00 activation set ------------------------------------------------------------------------
     def _on_get_version(self, f: dict[str, Any], now: float) -> dict[str, Any]:
         """The firmware's own layout (``version_layout``): ``id`` for A3/N3/M600/M210 firmware, as DJI's
-        Onboard-SDK 3.x library reads it; ``crc`` for M100 2.3; ``crc_id`` for firmware 3.1."""
+        Onboard-SDK 3.x library reads it; ``crc_id`` for firmware 3.1 (the M100 3.1.10.0); ``crc`` for
+        M100 2.3."""
         ack = 0 if self.activated else NOT_ACTIVATED_ACK
+        # The library finds the end of CRC + ID at the first NUL, so a real 3.1 firmware's CRC has no zero
+        # byte (DJI's library reads real M100s); this stand-in CRC gets none either.
         crc = zlib.crc32(self.version_name.encode()[:32])
+        crc = int.from_bytes(bytes(b or 1 for b in crc.to_bytes(4, "little")), "little")
         raw = cmds.encode_version_reply(
             ack, self.version_name, layout=self.version_layout, serial=self.serial, version_crc=crc
         )
@@ -682,6 +707,11 @@ class OsdkFcModel:
         held = round(self.go_home_altitude_m)
         return {"ack": 0 if ok else 1, "hash": f["hash"], "altitude": held}
 
+    def _on_go_home_altitude_read(self, f: dict[str, Any], now: float) -> dict[str, Any]:
+        """0x01 0x41 with the go-home altitude's hash: the value held (what 0x01 0x42 wrote, or the
+        configured ``go_home_altitude_m``), in the write's ACK layout."""
+        return {"ack": 0, "hash": f["hash"], "altitude": round(self.go_home_altitude_m)}
+
     def _exit(self, task: str) -> int:
         if self.task != task:
             return 9
@@ -715,7 +745,7 @@ class OsdkFcModel:
         if not self._movement_allowed():
             return  # ignored: on the ground, without authority, or an automatic task runs
         parts = split_control_flag(f["flag"])
-        sp = _SetPoint(parts, f["x"], f["y"], f["z"], f["yaw"])
+        sp = _SetPoint(parts, f["x"], f["y"], f["z"], f["yaw"], now)
         if parts["horizontal"] == HORIZONTAL_POSITION:
             dn, de = self._frame_to_ne(parts["frame"], f["x"], f["y"])
             sp.target_ne = (self.n + dn, self.e + de)
@@ -1099,6 +1129,9 @@ class OsdkFcModel:
         sp = self._sp
         if sp is None:
             return 0.0, 0.0, 0.0
+        if self._t - sp.at >= self.setpoint_hold:  # no new frame for that long: brake, then hold
+            self._enter_hover(None)
+            return self._fly_hover()
         hor, ver = sp.parts["horizontal"], sp.parts["vertical"]
         if hor == HORIZONTAL_VELOCITY:
             vn, ve = self._frame_to_ne(sp.parts["frame"], sp.x, sp.y)
@@ -1563,6 +1596,16 @@ def _latlon(text: str) -> tuple[float, float]:
     return lat, lon
 
 
+def _hold_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError("expected a number of seconds or 'inf'") from None
+    if not value > 0:  # also refuses nan
+        raise argparse.ArgumentTypeError("the hold time must be positive (or 'inf')")
+    return value
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``dji-gateway simulate osdk``: a flight controller on a pty (default) or a loopback TCP port."""
     p = argparse.ArgumentParser(prog="dji-gateway simulate osdk", description=__doc__.split("\n\n")[0])
@@ -1576,6 +1619,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--rc-mode", choices=("F", "P", "A"), default="F", help="RC mode switch (default F)")
     p.add_argument("--max-distance", type=float, default=2000.0, help="waypoint limit from home, m")
     p.add_argument(
+        "--setpoint-hold",
+        type=_hold_seconds,
+        default=math.inf,
+        metavar="SECONDS|inf",
+        help="how long a movement-control set-point is held without a new frame before the FC brakes "
+        "and hovers (default inf: held until the next; a real FC's hold time is not documented)",
+    )
+    p.add_argument(
         "--firmware",
         choices=("new", "m100"),
         default="new",
@@ -1588,6 +1639,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         rc_mode=ns.rc_mode,
         max_distance_m=ns.max_distance,
         firmware=ns.firmware,
+        setpoint_hold=ns.setpoint_hold,
     )
     device = OsdkFcDevice(model)
     stop = threading.Event()
@@ -1605,7 +1657,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     app = "any app id" if ns.app_id is None else f"app id {ns.app_id}"
     print(
         f"gateway port: {place} (activation accepts {app}; home {ns.home[0]},{ns.home[1]}; "
-        f"firmware {ns.firmware})",
+        f"firmware {ns.firmware}; set-points held {ns.setpoint_hold:g} s)",
         flush=True,
     )
     with contextlib.suppress(KeyboardInterrupt):

@@ -87,7 +87,9 @@ class Field:
             number = float(value)
             if math.isnan(number) or math.isinf(number):
                 raise LayoutError(f"{self.name}: must be finite")
-            return number
+            # never -0.0 on the wire (+ 0.0 turns it into 0.0 and leaves every other value as it is): a
+            # negated zero (a stick's "-x" at rest) reads as a sign to a device or a log, not as nothing
+            return number + 0.0
         if not isinstance(value, int):
             if isinstance(value, float) and value.is_integer():
                 value = int(value)
