@@ -48,14 +48,14 @@ def _ne(north: float, east: float) -> tuple[float, float]:
 class Rig:
     """The simulated flight controller's process, the gateway's (restartable), the cloud."""
 
-    def __init__(self, broker: LocalBroker, tmp: Path) -> None:
+    def __init__(self, broker: LocalBroker, tmp: Path, hold: str = "inf") -> None:
         self.broker, self.tmp = broker, tmp
         exe = str(Path(sys.executable).parent / "dji-gateway")
         self.exe = exe
         self.env = {k: v for k, v in os.environ.items() if not k.startswith("DJIGW_")} | {
             "PYTHONUNBUFFERED": "1"
         }
-        self.sim = Proc("fc", [exe, "simulate", "osdk", "--tcp", "0"], self.env)
+        self.sim = Proc("fc", [exe, "simulate", "osdk", "--tcp", "0", "--setpoint-hold", hold], self.env)
         url = self.sim.wait_for_line(r"simulator at (socket://127\.0\.0\.1:\d+)", 20).group(1)
         self.config = tmp / "gateway.toml"
         self.config.write_text(
@@ -64,6 +64,7 @@ class Rig:
             f'[[devices]]\ntype = "osdk"\nsn = "{SN}"\nurl = "{url}"\n'
         )
         self.cloud = CloudClient(broker.host, broker.port, GW)
+        self.hold = hold
         self.gateway: Proc | None = None
         self.generation = 0
 
@@ -87,9 +88,11 @@ class Rig:
         self.sim.stop()
 
 
-@pytest.fixture
-def rig(private_broker: LocalBroker, tmp_path: Path) -> Iterator[Rig]:
-    r = Rig(private_broker, tmp_path)
+@pytest.fixture(params=["inf"])
+def rig(request: pytest.FixtureRequest, private_broker: LocalBroker, tmp_path: Path) -> Iterator[Rig]:
+    """The simulated FC holds a movement set-point for ``request.param`` seconds (``inf``: forever, the
+    worst case; a finite hold: the FC brakes on its own once sticks stop)."""
+    r = Rig(private_broker, tmp_path, request.param)
     try:
         yield r
     finally:
@@ -164,7 +167,10 @@ class Sticks:
         self.thread.join(2)
 
 
+@pytest.mark.parametrize("rig", ["inf", "1"], indirect=True)
 def test_killed_mid_live_control_the_restart_stops_the_aircraft(rig: Rig) -> None:
+    """Either kind of controller is stopped within 5 s of the restart; the one that holds its set-point
+    forever is found moving and stopped by the gateway, and the cloud is told."""
     rig.start_gateway()
     rig.cloud.wait_for(f"{SN}/osd", lambda b: "latitude" in b["data"], timeout=20)
     assert _service(rig, "flight_authority_grab", {})["data"]["result"] == 0
@@ -180,21 +186,29 @@ def test_killed_mid_live_control_the_restart_stops_the_aircraft(rig: Rig) -> Non
         rig.kill_gateway()  # mid live control: nothing stops the set-point the FC holds
     finally:
         sticks.close()
-    time.sleep(1.0)  # the aircraft flies on, ungoverned
+    # inf: the aircraft flies on, ungoverned; 1 s: the FC brakes on its own (4 m/s at 4 m/s^2) and hovers
+    time.sleep(1.0 if rig.hold == "inf" else 3.0)
     rig.cloud.clear()
     restarted = rig.start_gateway()
     slow = _fresh_osd(rig, lambda d: d.get("horizontal_speed", 99) < 0.5, 10, "stopped after the restart")
     assert slow is not None
     stopped_after = time.monotonic() - restarted
     assert stopped_after < 5.0, f"stopped {stopped_after:.1f} s after the restart"
-    events = wait_until(
-        lambda: rig.cloud.find("/events", lambda b: b.get("method") == "x_osdk_safety_notify"), 5, what="told"
-    )
-    told = events[0]["data"]
-    assert told["action"] == "stopped", told
-    found = float(told["reason"].split("horizontal speed ")[1].split(" m/s")[0])
-    assert found > 3.0, told  # it was found moving: the stop is what stopped it
-    assert rig.gateway is not None and "found in the air under SDK control" in rig.gateway.output()
+    assert rig.gateway is not None
+    if rig.hold == "inf":  # found moving: the gateway's stop is what stopped it, and it says so
+        events = wait_until(
+            lambda: rig.cloud.find("/events", lambda b: b.get("method") == "x_osdk_safety_notify"),
+            5,
+            what="told",
+        )
+        told = events[0]["data"]
+        assert told["action"] == "stopped", told
+        found = float(told["reason"].split("horizontal speed ")[1].split(" m/s")[0])
+        assert found > 3.0, told
+        assert "found in the air under SDK control" in rig.gateway.output()
+    else:  # the FC braked on its own 1 s after the last stick: found hovering, nothing to stop or report
+        rig.gateway.wait_for_line("hovering: nothing to stop", 5)
+        assert not rig.cloud.find("/events", lambda b: b.get("method") == "x_osdk_safety_notify")
     # and it stays stopped: the FC holds the zero set-point
     time.sleep(1.5)
     assert _last_osd(rig)["horizontal_speed"] < 0.5

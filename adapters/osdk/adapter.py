@@ -67,6 +67,7 @@ from adapters.osdk.mission import (
     DM_AUTO_LANDING,
     DM_AUTO_TAKEOFF,
     DM_GO_HOME,
+    DM_SDK_CONTROL,
     KIND_WORDS,
     STATUS_STALE,
     FcMissionState,
@@ -96,6 +97,7 @@ CONTROL_OBTAINED, CONTROL_RELEASED = 0x0002, 0x0001
 CONTROL_IN_PROGRESS = (0x0003, 0x0004)
 CONTROL_RC_OWNS = (0x0000, 0x0005, 0x0006)
 MISSION_NOT_RUNNING = 0xD4  # ground-station ACK: no mission is running
+STILL_SPEED = 0.3  # m/s: slower than this (3-D), an aircraft found after a restart is hovering
 CONTROL_DEVICE_SDK = 2  # the control-device item's device_status: 0 RC, 1 mobile app, 2 onboard (SDK)
 AUTO_TAKEOFF = 11  # display mode while the FC's own take-off runs: missions are refused until it ends
 #: fly_to_point_progress while flying between points: twice a second, so the cloud hears from the flight
@@ -542,6 +544,11 @@ class AircraftAdapter(SupervisedAdapter):
         if self.fc.running(t.display_mode, now) or (t.display_mode in AUTOMATIC):
             return
         speed = math.hypot(*t.velocity[:2]) if t.velocity is not None else float("nan")
+        moving = t.velocity is None or math.hypot(*t.velocity) > STILL_SPEED
+        if not moving and t.display_mode != DM_SDK_CONTROL:
+            # hovering on its own (the FC's hold expired, or nothing was ever set): nothing to stop
+            log.info("aircraft %s: in the air under SDK control, hovering: nothing to stop", self.info.sn)
+            return
         self.safety_stops += 1
         self.send_movement(0.0, 0.0, 0.0, 0.0)
         self.emergency_stop()
