@@ -214,6 +214,19 @@ def _status(cloud: CloudClient, flight_id: str) -> list[str]:
     return [b["data"]["output"]["status"] for b in _progress(cloud, flight_id)]
 
 
+def _flying_leg_one(rig: dict[str, Any], flight: str) -> None:
+    """Wait until the route flies between waypoints 0 and 1 at speed."""
+    cloud, fc = rig["cloud"], rig["fc"]
+    wait_until(
+        lambda: (
+            any(e["data"]["output"]["ext"]["current_waypoint_index"] >= 1 for e in _progress(cloud, flight))
+            and fc.inspect(lambda m: m.speed) > 3.0
+        ),
+        60,
+        what="flying the route",
+    )
+
+
 @pytest.mark.slow
 def test_three_waypoint_route_flies_and_ends_ok(rig: dict[str, Any]) -> None:
     cloud, fc = rig["cloud"], rig["fc"]
@@ -275,15 +288,7 @@ def test_wrong_fingerprint_fails_and_nothing_moves(rig: dict[str, Any]) -> None:
 def test_pause_holds_and_recovery_finishes(rig: dict[str, Any]) -> None:
     cloud, fc = rig["cloud"], rig["fc"]
     flight = _prepare_and_execute(rig)
-    # wait until it flies between waypoints 0 and 1 at speed
-    wait_until(
-        lambda: (
-            any(e["data"]["output"]["ext"]["current_waypoint_index"] >= 1 for e in _progress(cloud, flight))
-            and fc.inspect(lambda m: m.speed) > 3.0
-        ),
-        60,
-        what="flying the route",
-    )
+    _flying_leg_one(rig, flight)
     assert cloud.service("flighttask_pause", None)["data"]["result"] == 0
     paused_at = time.monotonic()
     wait_until(lambda: math.hypot(*fc.inspect(lambda m: (m.vn, m.ve))) < 0.5, 3.0, what="holding")
@@ -517,19 +522,6 @@ def test_the_console_state_carries_the_route_progress_and_break_point(rig: dict[
     bp = _progress(cloud, flight)[-1]["data"]["output"]["ext"]["break_point"]
     assert ended["break_point"] == bp and bp["break_reason"] == 1283
     assert ended["route"] == shown["route"]  # the same route: the page does not fetch it again
-
-
-def _flying_leg_one(rig: dict[str, Any], flight: str) -> None:
-    """Wait until the route flies between waypoints 0 and 1 at speed."""
-    cloud, fc = rig["cloud"], rig["fc"]
-    wait_until(
-        lambda: (
-            any(e["data"]["output"]["ext"]["current_waypoint_index"] >= 1 for e in _progress(cloud, flight))
-            and fc.inspect(lambda m: m.speed) > 3.0
-        ),
-        60,
-        what="flying the route",
-    )
 
 
 def _osd_mode(cloud: CloudClient) -> int:
