@@ -35,6 +35,7 @@ __all__ = [
     "GimbalAttitude",
     "Handler",
     "LinkStats",
+    "TaskJournal",
     "TelemetrySink",
 ]
 
@@ -136,6 +137,20 @@ class TelemetrySink(Protocol):
         ...
 
 
+class TaskJournal(Protocol):
+    """Where a device keeps the task it started on the device (a fly-to, a take-off to point) so that a
+    restarted gateway continues it under the same id: the gateway's crash-safe store. One live task per
+    device."""
+
+    def remember(self, sn: str, kind: str, task_id: str, data: Mapping[str, Any]) -> None: ...
+
+    def forget(self, sn: str, task_id: str) -> None: ...
+
+    def recall(self, sn: str) -> tuple[str, str, dict[str, Any]] | None:
+        """The live task of ``sn``: (kind, task id, data), or None."""
+        ...
+
+
 #: a method's coroutine; it takes the request model its method is registered with (validated by the
 #: dispatcher), which differs per method, hence ``Any`` here and the concrete model in each handler
 Handler = Callable[[Any], Awaitable[CallResult]]
@@ -149,6 +164,8 @@ class Adapter(abc.ABC):
     handlers: Mapping[str, Handler]
     #: this device's request deadline (seconds); None: the dispatcher's default
     deadline: float | None = None
+    #: where it keeps the task it started on the device (set by the gateway before ``start``); None: nowhere
+    journal: TaskJournal | None = None
 
     @property
     @abc.abstractmethod

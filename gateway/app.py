@@ -131,7 +131,9 @@ class GatewayApp:
         drc.start()
         requests = CloudRequests(gateway_sn=gw, registry=self.registry, outbox=outbox, clock=self.clock,
                                  metrics=self.metrics)  # fmt: skip
-        store = self.store = StateStore(s.state_dir)
+        store = self.store = StateStore(s.state_dir, now_ms=self.clock.time_ms)
+        for adapter in self.devices:
+            adapter.journal = store  # the task a device starts outlives this process
         if s.state_dir is None:
             log.info("no state_dir: wayline tasks in flight are kept in memory only (not across a restart)")
         else:

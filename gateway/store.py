@@ -1,6 +1,9 @@
 """The gateway's one crash-safe store: what must outlive the process (the wayline tasks in flight, so a
 restarted gateway reports the mission the aircraft still flies under the same ``flight_id``).
 
+Besides the wayline tasks it is the devices' :class:`adapters.base.TaskJournal` (the fly-to or take-off
+to point a device started, so it continues under the same id after a restart).
+
 Owns one SQLite database (the standard library's ``sqlite3``) in the configured state directory
 (``state_dir``; ``dji-gateway run --simulate`` without one uses a temporary directory, and no directory at
 all keeps the store in memory, with a warning). Every write is one transaction in WAL mode with
@@ -17,6 +20,8 @@ from __future__ import annotations
 import json
 import logging
 import sqlite3
+import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -42,6 +47,13 @@ CREATE TABLE IF NOT EXISTS tasks (
     live INTEGER NOT NULL DEFAULT 1, -- 1 while the task runs or is paused
     updated_ms INTEGER NOT NULL
 );
+CREATE TABLE IF NOT EXISTS device_tasks (
+    sn TEXT PRIMARY KEY,            -- one live device task per device
+    kind TEXT NOT NULL,             -- fly_to, takeoff
+    task_id TEXT NOT NULL,
+    data TEXT NOT NULL,             -- what continuing it needs, as JSON
+    updated_ms INTEGER NOT NULL
+);
 """
 
 
@@ -64,8 +76,9 @@ class StoredTask:
 class StateStore:
     """The gateway's state on disk (or in memory when ``directory`` is None)."""
 
-    def __init__(self, directory: Path | None) -> None:
+    def __init__(self, directory: Path | None, *, now_ms: Callable[[], int] | None = None) -> None:
         self.path: Path | None = None
+        self._now_ms = now_ms or (lambda: int(time.time() * 1000))
         if directory is None:
             target = ":memory:"
         else:
@@ -127,6 +140,24 @@ class StateStore:
         return StoredTask(
             row[0], row[1], json.loads(row[2]), row[3], row[4], row[5], row[6], row[7], bool(row[8]), row[9]
         )
+
+    # -- device tasks (adapters.base.TaskJournal) ----------------------------------------------------
+    def remember(self, sn: str, kind: str, task_id: str, data: Mapping[str, Any]) -> None:
+        with self._tx():
+            self._db.execute(
+                "INSERT INTO device_tasks (sn, kind, task_id, data, updated_ms) VALUES (?, ?, ?, ?, ?) "
+                "ON CONFLICT(sn) DO UPDATE SET kind=excluded.kind, task_id=excluded.task_id, "
+                "data=excluded.data, updated_ms=excluded.updated_ms",
+                (sn, kind, task_id, json.dumps(dict(data)), self._now_ms()),
+            )
+
+    def forget(self, sn: str, task_id: str) -> None:
+        with self._tx():
+            self._db.execute("DELETE FROM device_tasks WHERE sn=? AND task_id=?", (sn, task_id))
+
+    def recall(self, sn: str) -> tuple[str, str, dict[str, Any]] | None:
+        row = self._db.execute("SELECT kind, task_id, data FROM device_tasks WHERE sn=?", (sn,)).fetchone()
+        return None if row is None else (row[0], row[1], json.loads(row[2]))
 
     def forget_before(self, cutoff_ms: int) -> int:
         """Drop ended tasks last changed before ``cutoff_ms`` (the store stays small)."""

@@ -298,3 +298,38 @@ def test_killed_mid_wayline_the_restart_reports_the_task_and_acts_on_it(rig: Rig
     finally:
         answerer.close()
         store.close()
+
+
+def test_killed_mid_fly_to_the_restart_continues_it_under_its_id(rig: Rig) -> None:
+    """The fly-to the gateway started is kept in the store: after a SIGKILL and a restart its progress goes
+    on under the same fly_to_id, to wayline_ok at the target."""
+    rig.start_gateway()
+    rig.cloud.wait_for(f"{SN}/osd", lambda b: "latitude" in b["data"], timeout=20)
+    assert _service(rig, "flight_authority_grab", {})["data"]["result"] == 0
+    _take_off(rig, 20.0)
+    target = _ne(150.0, 0.0)
+    points = [{"latitude": target[0], "longitude": target[1], "height": HOME_ALT + 20}]
+    r = _service(rig, "fly_to_point", {"fly_to_id": "far-150", "max_speed": 8, "points": points})
+    assert r["data"]["result"] == 0, r["data"]
+
+    def progress() -> list[dict[str, Any]]:
+        return [
+            b["data"]
+            for b in rig.cloud.find("/events", lambda b: b.get("method") == "fly_to_point_progress")
+            if b["data"]["fly_to_id"] == "far-150"
+        ]
+
+    _fresh_osd(rig, lambda d: d.get("horizontal_speed", 0) > 6.0, 15, "at cruise speed")
+    rig.kill_gateway()
+    time.sleep(1.0)
+    rig.cloud.clear()
+    rig.start_gateway()
+    going = wait_until(
+        lambda: [p for p in progress() if p["status"] == "wayline_progress"] or None, 10, what="continued"
+    )
+    assert 0 < going[0]["remaining_distance"] < 140, going[0]
+    assert going[0]["planned_path_points"] == points
+    done = wait_until(lambda: [p for p in progress() if p["status"] == "wayline_ok"] or None, 40, what="ok")
+    assert done[-1]["remaining_distance"] == 0
+    last = _last_osd(rig)
+    assert math.dist(target, (last["latitude"], last["longitude"])) < 1e-4  # ~10 m: at the target

@@ -82,3 +82,17 @@ def test_a_writer_killed_mid_write_leaves_a_whole_row(tmp_path: Path) -> None:
     store.close()
     assert row is not None
     assert row.total_points == row.done_points == row.waypoint_index == row.updated_ms > 0
+
+
+def test_the_device_task_journal_keeps_one_task_per_device(tmp_path: Path) -> None:
+    store = StateStore(tmp_path, now_ms=lambda: 5)
+    assert store.recall("AC-1") is None
+    store.remember("AC-1", "fly_to", "f-1", {"path": [[22.5, 113.9, 20.0]], "speed": 8.0})
+    store.remember("AC-1", "fly_to", "f-2", {"speed": 5.0})  # a new task replaces the old
+    store.forget("AC-1", "f-1")  # the old one's late end leaves the new one alone
+    store.close()
+    again = StateStore(tmp_path)
+    assert again.recall("AC-1") == ("fly_to", "f-2", {"speed": 5.0})
+    again.forget("AC-1", "f-2")
+    assert again.recall("AC-1") is None
+    again.close()

@@ -487,6 +487,7 @@ class AircraftAdapter(SupervisedAdapter):
         if task is not None and not task.live and task is not self._ended_task:
             self._ended_task = task  # ended here (finished, stopped, failed): its status pushes fade
             self._mission_ended_at = now
+            self._forget(task)
         if (
             mission_running
             and self.in_air
@@ -501,6 +502,7 @@ class AircraftAdapter(SupervisedAdapter):
         task.done.set()
         self._mission_ended_at = now
         self._ended_task = task
+        self._forget(task)
         self._stop_requested = None
         log.warning(
             "aircraft %s: %s %s ended by the flight controller: %s",
@@ -511,10 +513,57 @@ class AircraftAdapter(SupervisedAdapter):
         )
         self._notify("mission_ended", reason, task.task_id)
 
+    # -- the task journal: a fly-to or take-off continues under its id after a restart -----------------
+    def _remember(self, task: Task) -> None:
+        if self.journal is None:
+            return
+        data = {"points": task.points, "offset": task.offset, "path": task.path, "speed": task.speed,
+                "planned": task.planned}  # fmt: skip
+        try:
+            self.journal.remember(self.info.sn, task.kind, task.task_id, data)
+        except Exception:  # a full disk must not stop a flight
+            log.exception("aircraft %s: could not keep task %s", self.info.sn, task.task_id)
+
+    def _forget(self, task: Task) -> None:
+        if self.journal is not None and task.kind in ("fly_to", "takeoff"):
+            with contextlib.suppress(Exception):
+                self.journal.forget(self.info.sn, task.task_id)
+
+    def _continued(self) -> Task | None:
+        """The fly-to or take-off this device started before a restart, as the journal kept it."""
+        kept = None
+        if self.journal is not None:
+            with contextlib.suppress(Exception):
+                kept = self.journal.recall(self.info.sn)
+        if kept is None or kept[0] not in ("fly_to", "takeoff"):
+            return None
+        kind, task_id, d = kept
+        path = [(float(a), float(b), float(c)) for a, b, c in d.get("path", [])]
+        task = Task(kind, task_id, int(d.get("points", 0)), offset=int(d.get("offset", 0)), path=path,
+                    started=True, adopted=True)  # fmt: skip
+        task.speed = float(d.get("speed", 0.0))
+        task.planned = list(d.get("planned", []))
+        return task
+
     def _adopt(self, now: float) -> None:
         """A waypoint mission the FC flies that no task knows of (the gateway restarted mid-mission, or
         another host started it): a task follows it, so its progress is reported and pause, recovery,
-        return home and stop act on it. The wayline runner claims it (:meth:`OsdkWayline.claim`)."""
+        return home and stop act on it. A fly-to or take-off to point the journal kept continues under its
+        id, reported here; any other is claimed by the wayline runner (:meth:`OsdkWayline.claim`)."""
+        continued = self._continued()
+        if continued is not None:
+            continued.reached = (self.fc.target or 0) - 1
+            self.mission = continued
+            self._disagree_since = None
+            log.warning(
+                "aircraft %s: the flight controller is flying %s %s (started before a restart): following it",
+                self.info.sn,
+                KIND_WORDS[continued.kind],
+                continued.task_id,
+            )
+            self._notify("mission_adopted", f"{KIND_WORDS[continued.kind]} continued", continued.task_id)
+            self._start_watch(continued)
+            return
         task = Task("adopted", "", points=0, started=True, adopted=True)
         task.reached = (self.fc.target or 0) - 1
         self.mission = task
@@ -1046,6 +1095,7 @@ class AircraftAdapter(SupervisedAdapter):
         ]
         self.begin_mission(task)
         await self.start_mission(task)
+        self._remember(task)
         self._start_watch(task)
         return CallResult()
 
@@ -1188,6 +1238,7 @@ class AircraftAdapter(SupervisedAdapter):
             # 0 or absent → 1 continue (the seed's default)
             await self._upload(points, data.max_speed, exit_on_rc_lost=self._exit_on_rc_lost(data))
             await self.start_mission(task)
+            self._remember(task)
         except DeviceRejected as exc:
             self._progress(task, "wayline_failed", 0, exc.result)
             return

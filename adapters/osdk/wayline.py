@@ -169,8 +169,8 @@ class OsdkWayline:
     def claim(self) -> Task | None:
         """The waypoint mission the FC flies that no run follows (the adapter adopted it), once."""
         task = self.adapter.current_mission
-        if task is None or not task.adopted or not task.live or task is self._task:
-            return None
+        if task is None or task.kind != "adopted" or not task.live or task is self._task:
+            return None  # a continued fly-to or take-off reports itself (the adapter)
         self._task = task
         return task
 
