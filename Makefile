@@ -80,7 +80,7 @@ bench: venv mosquitto nats
 	$(PY) bench/run.py
 
 run: $(RUNTIME) mosquitto
-	$(PY) -m gateway.devrun $(ARGS)
+	$(PY) -m gateway.cli.devrun $(ARGS)
 
 schema: $(RUNTIME)
 	$(VENV)/bin/dji-gateway schema export

@@ -39,7 +39,7 @@ from aiohttp import WSMsgType, web
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 
 from gateway.audit import audit
-from gateway.codec_cli import json_safe
+from gateway.jsonsafe import json_safe
 from gateway.observability import VERSION, Observability
 from gateway.settings import ConsoleSettings
 from gateway.web import actions
