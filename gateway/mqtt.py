@@ -34,7 +34,7 @@ import struct
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,6 +44,7 @@ from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
+from gateway import pahocompat
 from gateway.broker_link import Loss, OfflineBuffer, ReconnectPolicy
 from gateway.clock import SYSTEM_CLOCK, Clock
 from gateway.metrics import Metrics
@@ -72,25 +73,39 @@ class Inbound:
 def close_client(client: paho.Client) -> None:
     """Release the sockets paho keeps after ``loop_stop`` (its wake-up socket pair stays open until the
     client object is collected, which a reference cycle can delay: an unclosed-socket warning later)."""
-    with contextlib.suppress(Exception):
-        client._reset_sockets()  # private, but the only way; harmless when already closed
+    pahocompat.release_sockets(client)
 
 
-def _raw_socket(sock: Any) -> socket.socket | None:
-    raw = getattr(sock, "_socket", sock)  # websockets wrap the socket
-    return raw if isinstance(raw, socket.socket) else None
+@contextlib.contextmanager
+def _plain_socket(sock: Any) -> Iterator[socket.socket | None]:
+    """The TCP connection under ``sock`` (a plain socket, an ``SSLSocket`` or paho's websocket wrapper) as
+    a plain ``socket.socket`` on a duplicate of its descriptor, through the public ``fileno()`` only:
+    options and ``shutdown`` act on the connection itself, and closing the duplicate leaves it open.
+    None where there is no descriptor."""
+    try:
+        fd = int(sock.fileno())
+        dup = socket.socket(fileno=os.dup(fd))
+    except (AttributeError, OSError, ValueError, TypeError):
+        yield None
+        return
+    try:
+        yield dup
+    finally:
+        dup.close()
 
 
 def _tcp_info(sock: Any) -> bytes | None:
     """Linux ``TCP_INFO`` of the connection (``struct tcp_info``), or None where there is none."""
-    raw = _raw_socket(sock)
     opt = getattr(socket, "TCP_INFO", None)
-    if raw is None or opt is None:
+    if sock is None or opt is None:
         return None
-    try:
-        info = raw.getsockopt(socket.IPPROTO_TCP, opt, 104)
-    except OSError:
-        return None
+    with _plain_socket(sock) as raw:
+        if raw is None:
+            return None
+        try:
+            info = raw.getsockopt(socket.IPPROTO_TCP, opt, 104)
+        except OSError:
+            return None
     return info if len(info) >= 60 else None
 
 
@@ -113,6 +128,12 @@ def tcp_last_ack_age(sock: Any) -> float | None:
         return None
     (ms,) = struct.unpack_from("I", info, 56)
     return float(ms) / 1000.0
+
+
+def _leave_writing_to_the_network_thread(client: paho.Client, userdata: Any, sock: Any) -> None:
+    """paho's ``socket_register_write`` hook while no network thread runs: its being set is what matters
+    (paho then queues a publish instead of writing it from the caller's thread); the thread, once started,
+    writes what is queued."""
 
 
 class _Prober:
@@ -497,11 +518,14 @@ class MqttBridge:
         self._aborting = False
         self._loss = Loss.CLOSED
         self._session_live = False
-        # while connect() runs in this thread, publishers elsewhere only queue their packets (paho writes
-        # directly from the caller when it has no network thread: it could write before the CONNECT)
-        client._thread = threading.current_thread()  # private, restored below; see the comment above
+        # while connect() runs in this thread and until paho's network thread runs, publishers elsewhere
+        # only queue their packets: paho writes directly from the caller when it has no network thread (it
+        # could write before the CONNECT) unless a socket_register_write callback is set (public API)
+        client.on_socket_register_write = _leave_writing_to_the_network_thread
+        started = False
         try:
             client.connect(ep.host, ep.port, **self._connect_kwargs())
+            started = True
         except ssl.SSLCertVerificationError as exc:
             return self._attempt_failed(
                 ep, f"TLS: the broker's certificate was refused: {exc.verify_message}"
@@ -514,13 +538,15 @@ class MqttBridge:
             self.policy.unreachable(self._clock())
             return self.policy.next_round(self._clock())
         finally:
-            client._thread = None
+            if not started:
+                client.on_socket_register_write = None
         client.loop_start()
+        client.on_socket_register_write = None  # the network thread writes from now on
         try:
             return self._run_connection(ep)
         finally:
             client.loop_stop()
-            client._reset_sockets(sockpair_only=True)  # loop_start makes a new wake-up pair each time
+            pahocompat.release_sockets(client, sockpair_only=True)  # loop_start makes a new pair each time
             self.stalled = False
 
     def _attempt_failed(self, ep: BrokerEndpoint, reason: str) -> float:
@@ -529,8 +555,7 @@ class MqttBridge:
         if reason != self.last_error:
             log.error("broker %s (%s): %s", ep.where(), self._name, reason)
         self.last_error = reason
-        with contextlib.suppress(Exception):
-            self._client._sock_close()
+        pahocompat.close_network_socket(self._client)
         return self.policy.refused(self._clock())
 
     def _run_connection(self, ep: BrokerEndpoint) -> float:
@@ -649,10 +674,9 @@ class MqttBridge:
         """Drop the connection without a DISCONNECT (it is stuck or never answered): paho's thread sees
         the socket end and reports the loss."""
         self._aborting = True
-        raw = _raw_socket(self._client.socket())
-        if raw is not None:
-            with contextlib.suppress(OSError):
-                socket.socket.shutdown(raw, socket.SHUT_RDWR)  # the plain socket's, also under TLS
+        with _plain_socket(self._client.socket()) as raw, contextlib.suppress(OSError):
+            if raw is not None:
+                raw.shutdown(socket.SHUT_RDWR)  # the TCP connection's, also under TLS
 
     def _close_for_stop(self) -> None:
         """Stopping: end the connection with a DISCONNECT (:meth:`stop` may have sent it already)."""
@@ -669,13 +693,13 @@ class MqttBridge:
 
     # -- paho callbacks (network thread) --------------------------------------------------------
     def _on_socket_open(self, client: paho.Client, userdata: Any, sock: paho.SocketLike) -> None:
-        raw = _raw_socket(sock)
-        try:
-            if raw is None:
-                raise AttributeError("no socket")
-            raw.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        except (OSError, AttributeError):
-            log.debug("could not set TCP_NODELAY on %r", type(sock).__name__)
+        with _plain_socket(sock) as raw:
+            try:
+                if raw is None:
+                    raise AttributeError("no socket")
+                raw.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            except (OSError, AttributeError):
+                log.debug("could not set TCP_NODELAY on %r", type(sock).__name__)
 
     def _on_connect(
         self,

@@ -223,8 +223,10 @@ class WebServer:
             await runner.cleanup()
             raise
         self._runner = runner
-        sockets = getattr(site._server, "sockets", None) or []
-        self.port = int(sockets[0].getsockname()[1]) if sockets else port
+        # the bound port (port 0 picks a free one): aiohttp's public BaseRunner.addresses, one
+        # getsockname() per listening socket of its sites
+        addresses = runner.addresses
+        self.port = int(addresses[0][1]) if addresses else port
         self._has_pages = asyncio.Event()
         self._pump_task = asyncio.get_running_loop().create_task(self._pump(), name="console-push")
 
