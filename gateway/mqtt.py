@@ -256,7 +256,6 @@ class MqttBridge:
         # those sent after its last ACK never arrived, and go back into the buffer (oldest first)
         self._recent: deque[tuple[float, str, bytes]] = deque(maxlen=max(1, settings.telemetry_buffer))
         self._drops_counted = (0, 0)
-        self._connected = asyncio.Event()
         self._subscribed = threading.Event()  # set once the broker acknowledged every subscription
         self._sub_mid: int | None = None
         self._dropped_logged = 0
@@ -326,16 +325,6 @@ class MqttBridge:
         self._stop.clear()
         self._supervisor = threading.Thread(target=self._supervise, name=f"mqtt-{self._name}", daemon=True)
         self._supervisor.start()
-
-    async def wait_connected(self, timeout: float | None = None) -> bool:
-        try:
-            if timeout is None:
-                await self._connected.wait()
-            else:
-                await self.clock.wait_for(self._connected.wait(), timeout)
-        except TimeoutError:
-            return False
-        return True
 
     @property
     def connected(self) -> bool:
@@ -771,8 +760,6 @@ class MqttBridge:
     ) -> None:
         self._subscribed.clear()
         self._metrics.set("mqtt_connected", 0, link=self._name)
-        with contextlib.suppress(RuntimeError):
-            self._loop.call_soon_threadsafe(self._connected.clear)
         if getattr(reason, "value", None) == SESSION_TAKEN_OVER:
             self._loss = Loss.TAKEN_OVER
         elif self._aborting and self._loss is not Loss.STALLED:
@@ -808,7 +795,6 @@ class MqttBridge:
 
     # -- loop side ------------------------------------------------------------------------------
     def _after_connect(self) -> None:
-        self._connected.set()
         if self.on_connected is not None:
             try:
                 self.on_connected()
