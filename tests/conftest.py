@@ -11,14 +11,24 @@ from hypothesis import HealthCheck, settings
 
 from gateway.local_broker import LocalBroker
 
+# Hypothesis profiles. Tests whose example count matters set it themselves (the DRC session's state
+# machine: 2,000 examples in tests/test_drc_session.py; the fuzzers), and every profile keeps those
+# (tests/test_suite_hygiene.py checks); the profile sets everyone else's.
+#   default  a developer's run: 200 examples, random, the failing examples remembered in .hypothesis/
+#   ci       CI=true: the same counts, derandomized (a run is reproducible on every worker and every run),
+#            no example database (a fresh clone has none to learn from), the reproduction blob printed
+#   quick    HYPOTHESIS_PROFILE=quick: 20 examples for a fast local loop; never in CI
 settings.register_profile(
     "default",
     deadline=None,
     max_examples=200,
     suppress_health_check=[HealthCheck.too_slow],
 )
-settings.register_profile("ci", parent=settings.get_profile("default"), max_examples=200, derandomize=True)
-settings.load_profile("ci" if os.environ.get("CI") else "default")
+settings.register_profile(
+    "ci", parent=settings.get_profile("default"), derandomize=True, database=None, print_blob=True
+)
+settings.register_profile("quick", parent=settings.get_profile("default"), max_examples=20)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE") or ("ci" if os.environ.get("CI") else "default"))
 
 
 @pytest.fixture(scope="session")

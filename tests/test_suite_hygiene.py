@@ -1,0 +1,35 @@
+"""What keeps the suite fast and honest in parallel: the example counts that matter survive every
+Hypothesis profile (the quick one included), and ``make test`` runs the suite under pytest-xdist."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from hypothesis import settings
+
+from tests.test_drc_session import DrcSessionMachine
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_the_drc_state_machine_keeps_its_2000_examples_under_every_profile() -> None:
+    assert DrcSessionMachine.TestCase.settings.max_examples >= 2000
+    for name in ("default", "ci", "quick"):
+        profile = settings.get_profile(name)
+        # a profile sets the others' count; the state machine's own settings are not derived from it
+        assert settings(profile, max_examples=2000).max_examples == 2000
+
+
+def test_the_ci_profile_is_reproducible() -> None:
+    ci = settings.get_profile("ci")
+    assert ci.derandomize and ci.database is None
+    assert ci.max_examples >= settings.get_profile("default").max_examples
+
+
+def test_make_test_runs_the_suite_in_parallel() -> None:
+    makefile = (ROOT / "Makefile").read_text()
+    recipe = re.search(r"^test:.*\n\t(.+)$", makefile, re.MULTILINE)
+    assert recipe is not None and "-n $(TEST_WORKERS)" in recipe.group(1)
+    workers = re.search(r"^TEST_WORKERS \?= (\d+)$", makefile, re.MULTILINE)
+    assert workers is not None and int(workers.group(1)) >= 2
