@@ -175,6 +175,11 @@ def test_every_readme_command_block_runs_as_a_reader_would() -> None:
         PORT=str(port),
         DJIGW_CONSOLE_BROKER=f"mqtt://127.0.0.1:{port}",
         DJIGW_METRICS__PORT=str(metrics_port),
+        # every README line is a fresh Python process; on a loaded machine (the suite runs in parallel) a
+        # `dji-gateway send` can take longer to start than the 3 s by which a pasted stick must follow
+        # its heartbeat (README: "paste the block"). The walkthrough checks the commands, not that
+        # window: the heartbeat failsafe has its own tests (tests/test_drc*.py, with a clock)
+        DJIGW_DRC__HEARTBEAT_TIMEOUT="30",
         PYTHONUNBUFFERED="1",
     )
     services: dict[str, tuple[subprocess.Popen[str], list[str]]] = {}
