@@ -17,6 +17,10 @@ QoS 1 messages published meanwhile wait in paho's queue and go out after the nex
 whichever node; osd (the topics ``buffered`` selects, QoS 0) waits in a bounded
 :class:`gateway.broker_link.OfflineBuffer` and is delivered in order after ``on_connected``.
 Knows topics only as strings; no Cloud API semantics.
+
+Why this module is longer than 500 lines: it owns one broker connection's whole life (probe, connect, watch
+for stalls, lose, buffer, fail over) across two threads whose hand-offs must be read together; the decisions
+already live in the sans-I/O broker_link.py and the paho internals in pahocompat.py.
 """
 
 from __future__ import annotations

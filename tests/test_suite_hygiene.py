@@ -3,6 +3,7 @@ Hypothesis profile (the quick one included), and ``make test`` runs the suite un
 
 from __future__ import annotations
 
+import ast
 import re
 from pathlib import Path
 
@@ -33,3 +34,30 @@ def test_make_test_runs_the_suite_in_parallel() -> None:
     assert recipe is not None and "-n $(TEST_WORKERS)" in recipe.group(1)
     workers = re.search(r"^TEST_WORKERS \?= (\d+)$", makefile, re.MULTILINE)
     assert workers is not None and int(workers.group(1)) >= 2
+
+
+#: Modules another branch is rewriting right now (issue 31: the osdk mission split, live control, the
+#: wayline service); their size is that branch's business.
+#: TODO(issue 31 branch): give them a reason or a split after the merge, then empty this set.
+SIZE_EXEMPT = (
+    "adapters/osdk/",
+    "gateway/wayline/",
+    "gateway/drc.py",
+    "gateway/drc_session.py",
+    "adapters/base.py",
+)
+
+
+def test_a_module_over_500_lines_says_why_at_its_top() -> None:
+    """A long module is a smell unless its docstring says why it is one piece (issue #32)."""
+    missing = []
+    for package in ("schemas", "adapters", "gateway"):
+        for path in sorted((ROOT / package).rglob("*.py")):
+            rel = path.relative_to(ROOT).as_posix()
+            text = path.read_text()
+            if text.count("\n") <= 500 or rel.startswith(SIZE_EXEMPT):
+                continue
+            doc = ast.get_docstring(ast.parse(text)) or ""
+            if "Why this module is longer than 500 lines" not in doc:
+                missing.append(rel)
+    assert missing == []

@@ -25,6 +25,10 @@ member. Each use checks that layout first and falls back to python-can's own ``s
 differs. It was read in python-can 4.3-4.6 (:data:`VIRTUAL_LAYOUT_CHECKED`; ``pyproject.toml`` pins ``<5``),
 and ``tests/test_library_internals.py`` fails when the installed python-can no longer has it, so the
 fast path never silently turns off.
+
+Why this module is longer than 500 lines: besides the thin link, it holds the python-can virtual-bus fast
+paths (signalled queue, batch sender) that issue #18 measured; they are about how this link reads and writes
+the bus and nothing else uses them.
 """
 
 from __future__ import annotations

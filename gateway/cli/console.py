@@ -15,6 +15,10 @@ Passwords are read from the environment (``DJIGW_CONSOLE_PASSWORD``), never from
 where ``ps`` would show them.
 
 Time: reads the system clock itself (a separate process; the gateway's injected clock is the service's).
+
+Why this module is longer than 500 lines: ``send`` and ``monitor`` share the broker client, the request checks
+and the monitor's state model with its rich and plain views; ``fly``, ``status`` and the contract checks
+already live in modules of their own.
 """
 
 from __future__ import annotations

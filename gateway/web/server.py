@@ -19,6 +19,10 @@ Must not know device protocols, Cloud API methods (``actions`` does) or Promethe
 
 Time: the web thread's own loop paces pages, pauses and the sign-in delay in real time (browsers see
 it); the gateway's clock (``Observability.clock``) keeps the console's sessions, uptime and timestamps.
+
+Why this module is longer than 500 lines: one route handler per endpoint of the console's HTTP API and its
+WebSocket push, on one server object whose life cycle and thread they share; the page's state and actions
+already live in state.py and actions.py.
 """
 
 from __future__ import annotations
