@@ -256,6 +256,10 @@ class MqttBridge:
         )
         self._buffer = OfflineBuffer(settings.telemetry_buffer, settings.telemetry_buffer_age)
         self._buffer_lock = threading.Lock()
+        # paho writes a byte to its wake-up socket pair on every publish and disconnect, from the caller's
+        # thread; the supervisor closes that pair after each connection (pahocompat.release_sockets). This
+        # lock keeps the two apart: unguarded, a publish racing the close raised EBADF out of publish()
+        self._wake_lock = threading.Lock()
         # buffered-topic messages recently handed to the socket: when a stalled connection is given up,
         # those sent after its last ACK never arrived, and go back into the buffer (oldest first)
         self._recent: deque[tuple[float, str, bytes]] = deque(maxlen=max(1, settings.telemetry_buffer))
@@ -366,8 +370,22 @@ class MqttBridge:
             recent.popleft()
         recent.append((now, topic, payload))
 
+    def _paho_publish(
+        self, topic: str, payload: bytes, qos: int, retain: bool = False
+    ) -> paho.MQTTMessageInfo:
+        with self._wake_lock:
+            return self._client.publish(topic, payload, qos=qos, retain=retain)
+
+    def _paho_disconnect(self) -> None:
+        with self._wake_lock:
+            self._client.disconnect()
+
+    def _release_sockets(self, *, sockpair_only: bool) -> None:
+        with self._wake_lock:
+            pahocompat.release_sockets(self._client, sockpair_only=sockpair_only)
+
     def _send(self, topic: str, payload: bytes, qos: int, retain: bool) -> bool:
-        info = self._client.publish(topic, payload, qos=qos, retain=retain)
+        info = self._paho_publish(topic, payload, qos, retain)
         ok = info.rc == paho.MQTT_ERR_SUCCESS or (qos > 0 and info.rc == paho.MQTT_ERR_NO_CONN)
         if not ok:
             self._metrics.inc("mqtt_publish_errors_total", link=self._name)
@@ -385,7 +403,7 @@ class MqttBridge:
             return 0
         items = self._buffer.take(self._clock())
         for n, (_, topic, payload) in enumerate(items):
-            info = self._client.publish(topic, payload, qos=0)
+            info = self._paho_publish(topic, payload, 0)
             if info.rc != paho.MQTT_ERR_SUCCESS:  # the link dropped again: keep the rest, in order
                 self._buffer.put_back(items[n:])
                 if n:
@@ -413,17 +431,17 @@ class MqttBridge:
         """Publish ``last`` (the clean offline message), wait for it briefly, disconnect."""
         self._stop.set()
         if last is not None and self._client.is_connected():
-            info = self._client.publish(last[0], last[1], qos=1)
+            info = self._paho_publish(last[0], last[1], 1)
             try:
                 info.wait_for_publish(timeout)
             except (RuntimeError, ValueError):
                 log.warning("offline message not delivered before shutdown")
-        self._client.disconnect()
+        self._paho_disconnect()
         if self._supervisor is not None:
             self._supervisor.join(timeout + self.settings.connect_timeout + 2)
             self._supervisor = None
         self._client.loop_stop()
-        close_client(self._client)
+        self._release_sockets(sockpair_only=False)
 
     # -- the supervisor thread ------------------------------------------------------------------
     def _supervise(self) -> None:
@@ -539,7 +557,7 @@ class MqttBridge:
             return self._run_connection(ep)
         finally:
             client.loop_stop()
-            pahocompat.release_sockets(client, sockpair_only=True)  # loop_start makes a new pair each time
+            self._release_sockets(sockpair_only=True)  # loop_start makes a new pair each time
             self.stalled = False
 
     def _attempt_failed(self, ep: BrokerEndpoint, reason: str) -> float:
@@ -673,7 +691,7 @@ class MqttBridge:
 
     def _close_for_stop(self) -> None:
         """Stopping: end the connection with a DISCONNECT (:meth:`stop` may have sent it already)."""
-        self._client.disconnect()
+        self._paho_disconnect()
         self._wait_done()
 
     def _wait_done(self) -> None:
