@@ -61,3 +61,13 @@ def test_a_module_over_500_lines_says_why_at_its_top() -> None:
             if "Why this module is longer than 500 lines" not in doc:
                 missing.append(rel)
     assert missing == []
+
+
+def test_every_module_with_a_shared_fixture_runs_as_one_group() -> None:
+    """A module- or class-scoped fixture split over parallel workers starts once per worker (a simulated
+    gateway, a browser, a NATS cluster): such modules are listed in conftest's SHARED_FIXTURE_MODULES."""
+    from tests.conftest import SHARED_FIXTURE_MODULES
+
+    shared = re.compile(r"scope=[\"'](module|class|package)[\"']")
+    found = {p.name for p in (ROOT / "tests").glob("test_*.py") if shared.search(p.read_text())}
+    assert found == set(SHARED_FIXTURE_MODULES)
