@@ -11,9 +11,10 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 # two stamps: the runtime install (`make run`) and the dev extras on top of it (`make test`, `make venv`)
 # pytest-xdist workers for `make test`: most tests wait on real brokers, devices and timeouts rather than
-# the CPU (the suite needs about 3 min of CPU), so more workers than cores overlap the waiting (on 2 cores:
-# -n 4 worksteal 369 s, -n 6 loadgroup long-first 337 s, each beside another run; CONTRIBUTING.md). loadgroup keeps a module with
-# shared fixtures on one worker (tests/conftest.py). `make test TEST_WORKERS=0` runs it in one process.
+# the CPU (the suite needs about 3 min of CPU), so more workers than cores overlap the waiting. On 2 cores,
+# each beside another run: -n 4 worksteal 369 s, -n 6 loadgroup long-first 337 s (CONTRIBUTING.md).
+# loadgroup keeps a module with shared fixtures on one worker (tests/conftest.py).
+# `make test TEST_WORKERS=0` runs the suite in one process.
 TEST_WORKERS ?= 6
 RUNTIME := $(VENV)/.installed-runtime
 DEV     := $(VENV)/.installed-dev
