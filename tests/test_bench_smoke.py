@@ -32,6 +32,11 @@ def test_every_bench_suite_runs_quick_to_the_end(suite: str, tmp_path: Path) -> 
         text=True,
         timeout=540,
     )
-    assert proc.returncode == 0, (proc.stdout[-3000:], proc.stderr[-3000:])
+    report = tmp_path / f"{suite}.txt"  # a failed suite's report holds its traceback (stderr goes on)
+    assert proc.returncode == 0, (
+        report.read_text()[-4000:] if report.is_file() else "(no report)",
+        proc.stdout[-2000:],
+        proc.stderr[-2000:],
+    )
     assert f"== {suite} ==" in proc.stdout, f"suite {suite} did not run"
-    assert (tmp_path / f"{suite}.txt").is_file()
+    assert report.is_file()
