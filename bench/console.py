@@ -250,8 +250,11 @@ def run(cfg: Config) -> list[Row]:
             idle_after = _cpu_percent(gateway.proc.pid, window)
         finally:
             code = gateway.stop()
-        if code != 0 or "Traceback" in gateway.output():
-            raise AssertionError(f"the gateway failed: {gateway.output()[-2000:]}")
+        output = gateway.output()
+        if code != 0 or "Traceback" in output:
+            at = output.find("Traceback")  # the first one, not the shutdown lines after it
+            shown = output[-2000:] if at < 0 else output[max(0, at - 500) : at + 3000]
+            raise AssertionError(f"the gateway failed (exit {code}): {shown}")
         trips = _round_trips(broker, n_trips, 1 if cfg.quick else 5)
     idle = (idle_before + idle_after) / 2
     rows.append(

@@ -239,7 +239,7 @@ def serve(doc: str) -> int:
     the tour's other devices."""
     import asyncio
 
-    from gateway.run_cli import serve as serve_gateway
+    from gateway.cli.run import serve as serve_gateway
 
     return asyncio.run(serve_gateway(load_settings(None, **json.loads(doc)), simulate=True))
 

@@ -29,9 +29,9 @@ import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion
 
 from bench.run import ROOT, Config, Row
+from gateway.cli.run import SIM_GIMBAL_PAYLOAD_INDEX
 from gateway.local_broker import LocalBroker
 from gateway.mqtt import close_client
-from gateway.run_cli import SIM_GIMBAL_PAYLOAD_INDEX
 
 GW = "GW-RESTARTS-1"
 

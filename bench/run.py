@@ -274,7 +274,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     ap.add_argument("--only", choices=names, action="append", help="run only this suite (repeatable)")
     ap.add_argument("--strict", action="store_true", help="exit 2 when a performance target is missed")
+    ap.add_argument(
+        "--results", type=Path, default=RESULTS, metavar="DIR",
+        help=f"where the reports go (default: {RESULTS.relative_to(ROOT)}/; the smoke test gives its own)",
+    )  # fmt: skip
     args = ap.parse_args(argv)
+    results: Path = args.results
     cfg = Config(quick=args.quick, repeat=2 if args.quick else 5)
     chosen = [(n, s) for n, s in SUITES if not args.only or n in args.only]
 
@@ -284,7 +289,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         head = header(cfg, f"{', '.join(sorted(PINNED))} {pinning}; the other suites on every CPU")
         print(head, flush=True)
-        RESULTS.mkdir(parents=True, exist_ok=True)
+        results.mkdir(parents=True, exist_ok=True)
         broken: list[str] = []
         missed: list[str] = []
         for name, suite in chosen:
@@ -302,7 +307,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 broken.append(name)
                 text = traceback.format_exc()
                 print(f"suite {name} FAILED:\n{text}", file=sys.stderr, flush=True)
-                (RESULTS / f"{name}.txt").write_text(f"{head}\n\n== {name} ==\nFAILED\n{text}")
+                (results / f"{name}.txt").write_text(f"{head}\n\n== {name} ==\nFAILED\n{text}")
                 continue
             table = format_table(rows)
             fails = [f"{r.group} / {r.case}" for r in rows if r.passed is False]
@@ -310,8 +315,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             verdict = "all targets met" if not fails else f"{len(fails)} target(s) missed"
             print(table)
             print(f"\n{name}: {verdict}", flush=True)
-            (RESULTS / f"{name}.txt").write_text(f"{head}\n\n== {name} ==\n{table}\n\n{name}: {verdict}\n")
-        print(f"\nreports in {RESULTS.relative_to(ROOT)}/")
+            (results / f"{name}.txt").write_text(f"{head}\n\n== {name} ==\n{table}\n\n{name}: {verdict}\n")
+        print(f"\nreports in {results}/")
         if broken:
             print(f"FAILED suites: {', '.join(broken)}", file=sys.stderr)
             return 1

@@ -31,6 +31,7 @@ from gateway.observability import Observability
 from gateway.settings import GatewaySettings
 from gateway.store import StateStore
 from gateway.wayline.service import WaylineService
+from gateway.web.server import WebServer
 from schemas import TopicKind, default_registry, subscriptions, topic
 from schemas.registry import Registry
 
@@ -83,6 +84,7 @@ class GatewayApp:
         self.wayline: WaylineService | None = None  # flighttask_* / return_home* (gateway/wayline)
         self.store: StateStore | None = None  # what must outlive the process (gateway/store.py)
         self.observability: Observability | None = None  # /metrics, /healthz, /status, / (None: off)
+        self.web: WebServer | None = None  # the aiohttp server (its own thread) that serves them
         #: told (topic, payload) of every message the northbound and the dispatcher publish, and of every
         #: message the dispatcher is handed (not drc/down, answered inline): the web console's log
         self.published: list[Callable[[str, bytes], None]] = []
@@ -173,9 +175,7 @@ class GatewayApp:
         waylines = loop.create_task(wayline.run(self.stop_event), name="wayline")
         consumer = loop.create_task(self._consume(), name="inbound")
         if s.metrics.enabled:
-            self.observability = Observability(self, loop, clock=self.clock).start(
-                s.metrics.host, s.metrics.port
-            )
+            self._serve_web(Observability(self, loop, clock=self.clock), loop)
         self.started.set()
         log.info("gateway %s running with %d device(s)", gw, len(self.devices))
         try:
@@ -183,6 +183,16 @@ class GatewayApp:
         finally:
             await self._shutdown(periodic, consumer, offline)
             await waylines  # ends with stop_event
+
+    def _serve_web(self, observability: Observability, loop: asyncio.AbstractEventLoop) -> None:
+        """Serve the views (``/metrics``, ``/healthz``, ``/status``, the console unless disabled) on the
+        metrics port; on the gateway's loop. A port that cannot be bound leaves both None (logged, never
+        fatal: the bridge matters more than its metrics)."""
+        s = self.settings
+        web = WebServer(observability, s.console, loop).start(s.metrics.host, s.metrics.port)
+        if web is not None:
+            observability.port = web.port
+            self.observability, self.web = observability, web
 
     def stop(self) -> None:
         self.stop_event.set()
@@ -231,8 +241,8 @@ class GatewayApp:
         if self.bridge is not None:
             await asyncio.to_thread(self.bridge.stop, offline)
         await asyncio.gather(*(a.stop() for a in self.devices), return_exceptions=True)
-        if self.observability is not None:
-            await asyncio.to_thread(self.observability.stop)
+        if self.web is not None:
+            await asyncio.to_thread(self.web.stop)
         if self.store is not None:
             self.store.close()
         log.info("stopped")

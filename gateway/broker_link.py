@@ -151,10 +151,6 @@ class ReconnectPolicy:
         ceiling = min(self.takeover_backoff_max, TAKEOVER_FIRST * 2.0 ** min(self._takeovers - 1, 32))
         return now + self._rng.uniform(ceiling / 2, ceiling)
 
-    def takeover_wait(self) -> float:
-        """The ceiling of the current takeover backoff (for the log line)."""
-        return min(self.takeover_backoff_max, TAKEOVER_FIRST * 2.0 ** max(self._takeovers - 1, 0))
-
 
 @dataclass(slots=True)
 class _Held:

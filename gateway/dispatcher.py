@@ -7,6 +7,10 @@ rules, the per-request deadline, and the mapping of adapter failures to result c
 Cloud API methods, never bytes; it publishes through an :class:`Outbox` and never blocks on it.
 A handler that raises is caught here, counted, and answered with 599001; nothing propagates to
 the MQTT thread or stops the loop (a peer gateway is known to go deaf after one such exception).
+
+Why this module is longer than 500 lines: it is the one request flow (validate, de-duplicate, route, check
+authority, run under a deadline, map the failure, answer once); its parts share the reply cache and the in-
+flight table, and splitting them would spread the "exactly one answer" rule over several files.
 """
 
 from __future__ import annotations

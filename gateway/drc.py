@@ -36,6 +36,11 @@ Sticks are the seed's: ``x`` lateral (+ left), ``y`` longitudinal (+ forward), `
 disagree. ``stick_control`` (DJI's newer docs) sends RC channels instead, mapped by
 ``drc_session.channels_to_setpoint``. Devices receive body-frame forward / right / up velocities and a
 clockwise yaw rate.
+
+Why this module is longer than 500 lines: it is the shell of the live-control session: the one lock, the
+motion writer, the DRC broker links, drc/down parsing and drc/up answers and the pushes, which must be read
+together to see that every stop reaches the writer without the loop; the decisions live in
+drc_session.py.
 """
 
 from __future__ import annotations

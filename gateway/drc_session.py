@@ -48,6 +48,9 @@ keeps sending zero. :class:`EmergencyStop` additionally asks every device to bra
 
 Clocks: :class:`Tick` events (the writer sends one per control period) apply the timeouts, so
 stick and heartbeat losses are noticed within one control period of their deadline.
+
+Why this module is longer than 500 lines: it is one state machine (states, events, actions and their
+transition handlers) with its theory of operation; split, its invariants would span files.
 """
 
 from __future__ import annotations

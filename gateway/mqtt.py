@@ -17,6 +17,10 @@ QoS 1 messages published meanwhile wait in paho's queue and go out after the nex
 whichever node; osd (the topics ``buffered`` selects, QoS 0) waits in a bounded
 :class:`gateway.broker_link.OfflineBuffer` and is delivered in order after ``on_connected``.
 Knows topics only as strings; no Cloud API semantics.
+
+Why this module is longer than 500 lines: it owns one broker connection's whole life (probe, connect, watch
+for stalls, lose, buffer, fail over) across two threads whose hand-offs must be read together; the decisions
+already live in the sans-I/O broker_link.py and the paho internals in pahocompat.py.
 """
 
 from __future__ import annotations
@@ -34,7 +38,7 @@ import struct
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,6 +48,7 @@ from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
+from gateway import pahocompat
 from gateway.broker_link import Loss, OfflineBuffer, ReconnectPolicy
 from gateway.clock import SYSTEM_CLOCK, Clock
 from gateway.metrics import Metrics
@@ -72,25 +77,39 @@ class Inbound:
 def close_client(client: paho.Client) -> None:
     """Release the sockets paho keeps after ``loop_stop`` (its wake-up socket pair stays open until the
     client object is collected, which a reference cycle can delay: an unclosed-socket warning later)."""
-    with contextlib.suppress(Exception):
-        client._reset_sockets()  # private, but the only way; harmless when already closed
+    pahocompat.release_sockets(client)
 
 
-def _raw_socket(sock: Any) -> socket.socket | None:
-    raw = getattr(sock, "_socket", sock)  # websockets wrap the socket
-    return raw if isinstance(raw, socket.socket) else None
+@contextlib.contextmanager
+def _plain_socket(sock: Any) -> Iterator[socket.socket | None]:
+    """The TCP connection under ``sock`` (a plain socket, an ``SSLSocket`` or paho's websocket wrapper) as
+    a plain ``socket.socket`` on a duplicate of its descriptor, through the public ``fileno()`` only:
+    options and ``shutdown`` act on the connection itself, and closing the duplicate leaves it open.
+    None where there is no descriptor."""
+    try:
+        fd = int(sock.fileno())
+        dup = socket.socket(fileno=os.dup(fd))
+    except (AttributeError, OSError, ValueError, TypeError):
+        yield None
+        return
+    try:
+        yield dup
+    finally:
+        dup.close()
 
 
 def _tcp_info(sock: Any) -> bytes | None:
     """Linux ``TCP_INFO`` of the connection (``struct tcp_info``), or None where there is none."""
-    raw = _raw_socket(sock)
     opt = getattr(socket, "TCP_INFO", None)
-    if raw is None or opt is None:
+    if sock is None or opt is None:
         return None
-    try:
-        info = raw.getsockopt(socket.IPPROTO_TCP, opt, 104)
-    except OSError:
-        return None
+    with _plain_socket(sock) as raw:
+        if raw is None:
+            return None
+        try:
+            info = raw.getsockopt(socket.IPPROTO_TCP, opt, 104)
+        except OSError:
+            return None
     return info if len(info) >= 60 else None
 
 
@@ -113,6 +132,12 @@ def tcp_last_ack_age(sock: Any) -> float | None:
         return None
     (ms,) = struct.unpack_from("I", info, 56)
     return float(ms) / 1000.0
+
+
+def _leave_writing_to_the_network_thread(client: paho.Client, userdata: Any, sock: Any) -> None:
+    """paho's ``socket_register_write`` hook while no network thread runs: its being set is what matters
+    (paho then queues a publish instead of writing it from the caller's thread); the thread, once started,
+    writes what is queued."""
 
 
 class _Prober:
@@ -231,11 +256,14 @@ class MqttBridge:
         )
         self._buffer = OfflineBuffer(settings.telemetry_buffer, settings.telemetry_buffer_age)
         self._buffer_lock = threading.Lock()
+        # paho writes a byte to its wake-up socket pair on every publish and disconnect, from the caller's
+        # thread; the supervisor closes that pair after each connection (pahocompat.release_sockets). This
+        # lock keeps the two apart: unguarded, a publish racing the close raised EBADF out of publish()
+        self._wake_lock = threading.Lock()
         # buffered-topic messages recently handed to the socket: when a stalled connection is given up,
         # those sent after its last ACK never arrived, and go back into the buffer (oldest first)
         self._recent: deque[tuple[float, str, bytes]] = deque(maxlen=max(1, settings.telemetry_buffer))
         self._drops_counted = (0, 0)
-        self._connected = asyncio.Event()
         self._subscribed = threading.Event()  # set once the broker acknowledged every subscription
         self._sub_mid: int | None = None
         self._dropped_logged = 0
@@ -306,16 +334,6 @@ class MqttBridge:
         self._supervisor = threading.Thread(target=self._supervise, name=f"mqtt-{self._name}", daemon=True)
         self._supervisor.start()
 
-    async def wait_connected(self, timeout: float | None = None) -> bool:
-        try:
-            if timeout is None:
-                await self._connected.wait()
-            else:
-                await self.clock.wait_for(self._connected.wait(), timeout)
-        except TimeoutError:
-            return False
-        return True
-
     @property
     def connected(self) -> bool:
         return self._client.is_connected()
@@ -352,8 +370,22 @@ class MqttBridge:
             recent.popleft()
         recent.append((now, topic, payload))
 
+    def _paho_publish(
+        self, topic: str, payload: bytes, qos: int, retain: bool = False
+    ) -> paho.MQTTMessageInfo:
+        with self._wake_lock:
+            return self._client.publish(topic, payload, qos=qos, retain=retain)
+
+    def _paho_disconnect(self) -> None:
+        with self._wake_lock:
+            self._client.disconnect()
+
+    def _release_sockets(self, *, sockpair_only: bool) -> None:
+        with self._wake_lock:
+            pahocompat.release_sockets(self._client, sockpair_only=sockpair_only)
+
     def _send(self, topic: str, payload: bytes, qos: int, retain: bool) -> bool:
-        info = self._client.publish(topic, payload, qos=qos, retain=retain)
+        info = self._paho_publish(topic, payload, qos, retain)
         ok = info.rc == paho.MQTT_ERR_SUCCESS or (qos > 0 and info.rc == paho.MQTT_ERR_NO_CONN)
         if not ok:
             self._metrics.inc("mqtt_publish_errors_total", link=self._name)
@@ -371,7 +403,7 @@ class MqttBridge:
             return 0
         items = self._buffer.take(self._clock())
         for n, (_, topic, payload) in enumerate(items):
-            info = self._client.publish(topic, payload, qos=0)
+            info = self._paho_publish(topic, payload, 0)
             if info.rc != paho.MQTT_ERR_SUCCESS:  # the link dropped again: keep the rest, in order
                 self._buffer.put_back(items[n:])
                 if n:
@@ -399,17 +431,17 @@ class MqttBridge:
         """Publish ``last`` (the clean offline message), wait for it briefly, disconnect."""
         self._stop.set()
         if last is not None and self._client.is_connected():
-            info = self._client.publish(last[0], last[1], qos=1)
+            info = self._paho_publish(last[0], last[1], 1)
             try:
                 info.wait_for_publish(timeout)
             except (RuntimeError, ValueError):
                 log.warning("offline message not delivered before shutdown")
-        self._client.disconnect()
+        self._paho_disconnect()
         if self._supervisor is not None:
             self._supervisor.join(timeout + self.settings.connect_timeout + 2)
             self._supervisor = None
         self._client.loop_stop()
-        close_client(self._client)
+        self._release_sockets(sockpair_only=False)
 
     # -- the supervisor thread ------------------------------------------------------------------
     def _supervise(self) -> None:
@@ -497,11 +529,14 @@ class MqttBridge:
         self._aborting = False
         self._loss = Loss.CLOSED
         self._session_live = False
-        # while connect() runs in this thread, publishers elsewhere only queue their packets (paho writes
-        # directly from the caller when it has no network thread: it could write before the CONNECT)
-        client._thread = threading.current_thread()  # private, restored below; see the comment above
+        # while connect() runs in this thread and until paho's network thread runs, publishers elsewhere
+        # only queue their packets: paho writes directly from the caller when it has no network thread (it
+        # could write before the CONNECT) unless a socket_register_write callback is set (public API)
+        client.on_socket_register_write = _leave_writing_to_the_network_thread
+        started = False
         try:
             client.connect(ep.host, ep.port, **self._connect_kwargs())
+            started = True
         except ssl.SSLCertVerificationError as exc:
             return self._attempt_failed(
                 ep, f"TLS: the broker's certificate was refused: {exc.verify_message}"
@@ -514,13 +549,15 @@ class MqttBridge:
             self.policy.unreachable(self._clock())
             return self.policy.next_round(self._clock())
         finally:
-            client._thread = None
+            if not started:
+                client.on_socket_register_write = None
         client.loop_start()
+        client.on_socket_register_write = None  # the network thread writes from now on
         try:
             return self._run_connection(ep)
         finally:
             client.loop_stop()
-            client._reset_sockets(sockpair_only=True)  # loop_start makes a new wake-up pair each time
+            self._release_sockets(sockpair_only=True)  # loop_start makes a new pair each time
             self.stalled = False
 
     def _attempt_failed(self, ep: BrokerEndpoint, reason: str) -> float:
@@ -529,8 +566,7 @@ class MqttBridge:
         if reason != self.last_error:
             log.error("broker %s (%s): %s", ep.where(), self._name, reason)
         self.last_error = reason
-        with contextlib.suppress(Exception):
-            self._client._sock_close()
+        pahocompat.close_network_socket(self._client)
         return self.policy.refused(self._clock())
 
     def _run_connection(self, ep: BrokerEndpoint) -> float:
@@ -649,14 +685,13 @@ class MqttBridge:
         """Drop the connection without a DISCONNECT (it is stuck or never answered): paho's thread sees
         the socket end and reports the loss."""
         self._aborting = True
-        raw = _raw_socket(self._client.socket())
-        if raw is not None:
-            with contextlib.suppress(OSError):
-                socket.socket.shutdown(raw, socket.SHUT_RDWR)  # the plain socket's, also under TLS
+        with _plain_socket(self._client.socket()) as raw, contextlib.suppress(OSError):
+            if raw is not None:
+                raw.shutdown(socket.SHUT_RDWR)  # the TCP connection's, also under TLS
 
     def _close_for_stop(self) -> None:
         """Stopping: end the connection with a DISCONNECT (:meth:`stop` may have sent it already)."""
-        self._client.disconnect()
+        self._paho_disconnect()
         self._wait_done()
 
     def _wait_done(self) -> None:
@@ -669,13 +704,13 @@ class MqttBridge:
 
     # -- paho callbacks (network thread) --------------------------------------------------------
     def _on_socket_open(self, client: paho.Client, userdata: Any, sock: paho.SocketLike) -> None:
-        raw = _raw_socket(sock)
-        try:
-            if raw is None:
-                raise AttributeError("no socket")
-            raw.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        except (OSError, AttributeError):
-            log.debug("could not set TCP_NODELAY on %r", type(sock).__name__)
+        with _plain_socket(sock) as raw:
+            try:
+                if raw is None:
+                    raise AttributeError("no socket")
+                raw.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            except (OSError, AttributeError):
+                log.debug("could not set TCP_NODELAY on %r", type(sock).__name__)
 
     def _on_connect(
         self,
@@ -747,8 +782,6 @@ class MqttBridge:
     ) -> None:
         self._subscribed.clear()
         self._metrics.set("mqtt_connected", 0, link=self._name)
-        with contextlib.suppress(RuntimeError):
-            self._loop.call_soon_threadsafe(self._connected.clear)
         if getattr(reason, "value", None) == SESSION_TAKEN_OVER:
             self._loss = Loss.TAKEN_OVER
         elif self._aborting and self._loss is not Loss.STALLED:
@@ -784,7 +817,6 @@ class MqttBridge:
 
     # -- loop side ------------------------------------------------------------------------------
     def _after_connect(self) -> None:
-        self._connected.set()
         if self.on_connected is not None:
             try:
                 self.on_connected()

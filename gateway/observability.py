@@ -4,7 +4,8 @@ Owns the translation of :class:`gateway.metrics.Metrics` (counters, gauges, hist
 fills without knowing Prometheus) and of the live objects (devices, their links, the DRC session, the
 broker connection) into Prometheus families and one JSON document. They are served on
 ``metrics.host:metrics.port`` (127.0.0.1:9108 by default) by the same aiohttp server as the web console
-(:mod:`gateway.web.server`, on a thread and loop of its own), which :meth:`Observability.start` starts.
+(:mod:`gateway.web.server`, on a thread and loop of its own), which the composition root
+(:mod:`gateway.app`) starts with these views: the web package reads this module, never the reverse.
 
 Every request reads the gateway through one :meth:`Observability.snapshot`, taken **on the event loop**
 (with a deadline): a loop that cannot answer within :data:`LOOP_DEADLINE` makes ``/healthz`` fail, which
@@ -159,9 +160,8 @@ def safe_url(url: str) -> str:
 
 # ------------------------------------------------------------------------------------------------ snapshot
 class Observability:
-    """Snapshots of one running :class:`gateway.app.GatewayApp`, as Prometheus families and JSON, and the
-    HTTP server that serves them. ``start()`` binds the port (failure is logged, never fatal: the
-    bridge matters more than its metrics); ``stop()`` closes it."""
+    """Snapshots of one running :class:`gateway.app.GatewayApp`, as Prometheus families and JSON.
+    ``port`` is where the web server that serves them listens (set by the composition root once bound)."""
 
     def __init__(self, app: Any, loop: Any = None, *, clock: Clock = SYSTEM_CLOCK) -> None:
         self.app = app
@@ -174,7 +174,7 @@ class Observability:
         self._monotonic = _Monotonic()
         self.registry = CollectorRegistry(auto_describe=False)
         self.registry.register(_Collector(self))
-        self._server: Any = None  # gateway.web.server.WebServer once started
+        #: the port the web server (:class:`gateway.web.server.WebServer`) serves these views on
         self.port: int | None = None
 
     # -- data -------------------------------------------------------------------------------------
@@ -307,25 +307,6 @@ class Observability:
     def families(self, snap: dict[str, Any] | None = None) -> Iterator[Metric]:
         snap = snap or self.snapshot()
         yield from _families(snap)
-
-    # -- HTTP ---------------------------------------------------------------------------------------
-    def start(self, host: str, port: int) -> Observability | None:
-        """Serve these views (and the web console, unless ``console.enabled`` is false) on ``host:port``
-        with :class:`gateway.web.server.WebServer`; called on the gateway's loop. None when the port
-        cannot be bound (logged, never fatal: the bridge matters more than its metrics)."""
-        from gateway.web.server import WebServer  # the web package reads these views: imported late
-
-        server = WebServer(self, self.app.settings.console, self.loop).start(host, port)
-        if server is None:
-            return None
-        self._server = server
-        self.port = server.port
-        return self
-
-    def stop(self) -> None:
-        server, self._server = self._server, None
-        if server is not None:
-            server.stop()
 
 
 class _Collector(Collector):

@@ -420,9 +420,11 @@ def _json_dictionary(kind_name: str) -> list[bytes]:
     return sorted(w.encode() for w in words)
 
 
-def _dict_file(target: str, words: list[bytes]) -> str:
-    """Write a libFuzzer ``-dict`` file (one per target, in the temp dir, replaced atomically)."""
-    path = os.path.join(tempfile.gettempdir(), f"dji-gateway-atheris-{target}.dict")
+def _dict_file(target: str, words: list[bytes], directory: str | None = None) -> str:
+    """Write a libFuzzer ``-dict`` file: in ``directory`` (the run's artifact folder: each run its own, so
+    runs in parallel, or of another checkout, never read each other's), else one per target in the temp
+    dir, replaced atomically."""
+    path = os.path.join(directory or tempfile.gettempdir(), f"dji-gateway-atheris-{target}.dict")
 
     def quoted(word: bytes) -> str:
         return "".join(chr(b) if 32 <= b < 127 and b not in b'"\\' else f"\\x{b:02x}" for b in word)
@@ -568,7 +570,9 @@ def main(argv: list[str]) -> None:
     if not any(a.startswith("-max_len=") for a in args):
         args = [f"-max_len={target.max_len}", *args]
     if target.dictionary is not None and not any(a.startswith("-dict=") for a in args):
-        args = [f"-dict={_dict_file(argv[1], target.dictionary())}", *args]
+        prefix = next((a.split("=", 1)[1] for a in args if a.startswith("-artifact_prefix=")), "")
+        folder = prefix if prefix.endswith("/") and os.path.isdir(prefix) else None
+        args = [f"-dict={_dict_file(argv[1], target.dictionary(), folder)}", *args]
     atheris.Setup([argv[0], *args], one_input)
     atheris.Fuzz()
 

@@ -12,8 +12,8 @@ from typing import Any
 
 import pytest
 
+from gateway.cli.run import SIM_AIRCRAFT_SN, SIM_GATEWAY_SN
 from gateway.local_broker import LocalBroker
-from gateway.run_cli import SIM_AIRCRAFT_SN, SIM_GATEWAY_SN
 from schemas.examples import CLOUD_SHAPES
 from tests.support import CloudClient, simulated_gateway
 

@@ -111,7 +111,7 @@ def test_a_broker_list_and_a_repeated_broker_flag(tmp_path: Path) -> None:
             load_settings(None, gateway_sn="G", broker={"url": bad})
 
     from gateway.cli import build_parser
-    from gateway.run_cli import _settings_from
+    from gateway.cli.run import _settings_from
 
     ns = build_parser().parse_args(
         ["run", "--broker", "mqtt://a:1", "--broker", "mqtt://b:2", "--gateway-sn", "G"]

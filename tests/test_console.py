@@ -19,7 +19,7 @@ from rich.console import Console
 
 from adapters.rsdk.sim import GimbalCanSim
 from gateway.cli import main
-from gateway.console import _FAILSAFE_TEXT, MonitorState, build_message, parse_fields, render
+from gateway.cli.console import _FAILSAFE_TEXT, MonitorState, build_message, parse_fields, render
 from gateway.local_broker import LocalBroker, free_port
 from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
 

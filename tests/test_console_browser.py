@@ -32,7 +32,7 @@ from typing import Any
 
 import pytest
 
-from gateway.codec_cli import parse_assignments
+from gateway.cli.codec import parse_assignments
 from gateway.local_broker import LocalBroker
 from tests.support import CloudClient, Proc, simulated_gateway, wait_until
 from tests.test_readme_walkthrough import command_blocks

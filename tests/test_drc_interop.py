@@ -19,8 +19,8 @@ from typing import Any
 import paho.mqtt.client as paho
 import pytest
 
+from gateway.cli.run import SIM_GATEWAY_SN, SIM_GIMBAL_PAYLOAD_INDEX
 from gateway.local_broker import LocalBroker
-from gateway.run_cli import SIM_GATEWAY_SN, SIM_GIMBAL_PAYLOAD_INDEX
 from tests.support import CloudClient, simulated_gateway, wait_until
 
 pytestmark = [pytest.mark.broker, pytest.mark.slow]

@@ -23,8 +23,8 @@ from typing import Any
 
 import pytest
 
+from gateway.cli.run import SIM_AIRCRAFT_SN, SIM_GATEWAY_SN
 from gateway.local_broker import LocalBroker
-from gateway.run_cli import SIM_AIRCRAFT_SN, SIM_GATEWAY_SN
 from tests.support import CloudClient, wait_until
 
 pytestmark = pytest.mark.broker

@@ -12,9 +12,10 @@ from pathlib import Path
 import pytest
 
 from adapters import families
-from gateway import codec_cli, run_cli
 from gateway.app import build_registry
-from gateway.config_cli import reference_markdown
+from gateway.cli import codec as codec_cli
+from gateway.cli import run as run_cli
+from gateway.cli.config import reference_markdown
 from gateway.settings import ConfigError, load_settings
 from schemas import TopicKind
 from tests import toy_family

@@ -22,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from gateway.fly import ESC_WAIT, KeyDecoder, Sticks
+from gateway.cli.fly import ESC_WAIT, KeyDecoder, Sticks
 from gateway.local_broker import LocalBroker
 from tests.support import CloudClient, wait_until
 

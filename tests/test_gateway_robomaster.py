@@ -21,8 +21,8 @@ from adapters.robomaster.commands import DEFAULT_CONTROL, INTERACTION_CMD_ID, Co
 from adapters.robomaster.config import RobomasterDeviceSettings
 from adapters.robomaster.sim import RefereeMatch, RobomasterSim, Stages
 from adapters.simio import PtyEndpoint
+from gateway.cli.run import SIM_ROBOT_SN, SIM_ROBOT_URL, simulated_settings, start_simulators
 from gateway.local_broker import LocalBroker
-from gateway.run_cli import SIM_ROBOT_SN, SIM_ROBOT_URL, simulated_settings, start_simulators
 from gateway.settings import ConfigError, load_settings
 from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
 

@@ -20,7 +20,7 @@ import pytest
 from paho.mqtt.enums import CallbackAPIVersion
 
 from gateway.cli import main, source_checkout_json_dir
-from gateway.contract_cli import check_request, closest
+from gateway.cli.contract import check_request, closest
 from gateway.local_broker import LocalBroker
 from gateway.mqtt import close_client
 from tests.support import gateway_settings, wait_until

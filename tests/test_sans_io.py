@@ -8,6 +8,8 @@ import ast
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 FORBIDDEN_STDLIB = {"socket", "threading", "asyncio", "select", "selectors", "subprocess", "time"}
 
@@ -63,11 +65,12 @@ def test_protocol_modules_import_only_stdlib_and_wire() -> None:
     assert _offenders(_sans_io_modules()) == []
 
 
-def test_the_rule_catches_an_offender(tmp_path: Path) -> None:
-    bad = ROOT / "adapters" / "wire" / "_probe_offender.py"
-    bad.write_text("import can\nimport socket\nfrom adapters.rsdk import link\n")
-    try:
-        found = _offenders([bad])
-    finally:
-        bad.unlink()
-    assert len(found) == 3
+def test_the_rule_catches_an_offender(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # in a copy of the layout under tmp_path, never in the source tree (tests running beside this one
+    # walk adapters/ and would find the probe)
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    bad = tmp_path / "adapters" / "wire" / "_probe_offender.py"
+    bad.parent.mkdir(parents=True)
+    bad.write_text("import can\nimport socket\nfrom adapters.rsdk import link\nfrom . import stream\n")
+    found = _offenders([bad])
+    assert len(found) == 3, found

@@ -22,8 +22,8 @@ import pytest
 from adapters import families
 from adapters.simio import TcpEndpoint
 from gateway.cli import main as cli_main
+from gateway.cli.run import simulated_settings, start_simulators
 from gateway.local_broker import LocalBroker
-from gateway.run_cli import simulated_settings, start_simulators
 from gateway.settings import load_settings
 from gateway.web.frames import LinkInspector
 from tests import toy_family

@@ -29,6 +29,13 @@ Ground-station ACK codes map to 336000 + code (``schemas.results.ground_station_
 seed's text in ``output.reason``; control ACKs that mean "the RC owns the aircraft" map to 319030.
 Heights: the Cloud API's are WGS84 (``height``, ``target_height``); waypoints are relative to the
 take-off point, so the adapter subtracts the home altitude (telemetry ``altitude − height``).
+
+Why this module is longer than 500 lines: it is one flight controller's session: the link, the
+session layer (sessions, resends, ACKs), activation, the telemetry it decodes, the truth it holds the
+gateway's intent against, and the Cloud API methods, which all share one command path and one view of the
+FC. What can stand alone already does: the codec (commands.py, protocol.py, telemetry.py), the mission
+record, mode table and reconciliation (mission.py), the route planner (wayline_plan.py) and the runner
+(wayline.py).
 """
 
 from __future__ import annotations

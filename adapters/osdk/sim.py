@@ -57,6 +57,11 @@ Flight model: a point mass with a 4 m/s^2 acceleration limit on a flat earth aro
 (north/east metres; latitude = home + north / R, longitude = home + east / (R cos(home lat)),
 R = 6378137 m), good to centimetres over the few kilometres a mission spans. Height is above the
 take-off point; altitude is ``home_altitude`` + height. Attitude is yaw only.
+
+Why this module is longer than 500 lines: it is one flight controller: its link rules, every command it
+answers, the flight model every task flies on and the pushes it makes share one state, and a simulator
+split across files would hide the interplay (a brake ends a mission, a take-off precedes a mission) that
+makes it faithful.
 """
 
 from __future__ import annotations

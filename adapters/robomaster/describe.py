@@ -1,7 +1,7 @@
 """The RoboMaster codec as the ``dji-gateway decode/encode`` CLI sees it (CLI contract).
 
 Owns: turning frames and messages into JSON-able dicts and CLI options into codec settings.
-Must not know argument parsing or output formatting (``gateway/codec_cli.py``).
+Must not know argument parsing or output formatting (``gateway/cli/codec.py``).
 
 Options: ``season`` = "2024" | "2025" | "2026" (default 2026), ``control_cmd_id`` = int (default
 0x0F01; 0x0301 carries control messages inside robot interaction frames). Also accepted:

@@ -24,6 +24,10 @@ robot starts at (2, 7.5) facing east: angle 90.
 
 Time: a simulator keeps its own, real time (``time.monotonic``), as the device it stands for does; the
 gateway's injected clock is not the device's.
+
+Why this module is longer than 500 lines: it holds the two sans-I/O models of one device on one UART (the
+referee's match, the robot's main board), the stream device that carries both and the simulator's entry
+points; each model is one device's behaviour on one clock.
 """
 
 from __future__ import annotations

@@ -30,6 +30,9 @@ method's failure result above.
 Directions (chosen, since neither the seed nor the Cloud API says): a positive Cloud API
 ``pitch_speed`` tilts up (R SDK pitch angle increases), a positive ``yaw_speed`` pans right
 (R SDK yaw angle increases); "down" is pitch −90° clamped to the gimbal's range (−56° on an RS).
+
+Why this module is longer than 500 lines: one Cloud API method → R SDK command mapping per service the gimbal
+offers, plus its pushes; the link, the codec and the supervision already live in their own modules.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """CLI contract for the R SDK family: decode bytes or candump text to JSON-able dicts, encode commands.
 
-Used by ``gateway/cli.py`` (``decode``/``encode``); everything derives from the command table.
+Used by ``gateway/cli/__init__.py`` (``decode``/``encode``); everything derives from the command table.
 Replies are matched to the commands seen earlier in the same input by SEQ, so a legacy reply (no
 CmdSet/CmdID) is decoded against the command it answers; ``reply_to=<command name>`` covers replies
 whose command is not in the input; ``angle_order`` says how a legacy angle reply is laid out

@@ -16,6 +16,19 @@ through ``on_down``.
 it puts on the bus, as ``observer("rx" | "tx", arb_id, data)`` from the notifier thread, the sender
 thread or the sending caller's thread: a frame tap (the web console's frame inspector) that must be
 thread-safe, bounded and quick, and whose failure never touches the link.
+
+python-can's ``virtual`` bus (the simulators' and the tests'): its fast paths (:func:`virtual_reader`,
+:func:`virtual_sender`) rely on how ``can.interfaces.virtual`` lays a bus out, which python-can does not
+document: the attributes ``queue``, ``channel`` (the channel's list of queues), ``channel_id``,
+``receive_own_messages``, ``preserve_timestamps`` and the module's ``channels_lock``; no underscore
+member. Each use checks that layout first and falls back to python-can's own ``send``/notifier when it
+differs. It was read in python-can 4.3-4.6 (:data:`VIRTUAL_LAYOUT_CHECKED`; ``pyproject.toml`` pins ``<5``),
+and ``tests/test_library_internals.py`` fails when the installed python-can no longer has it, so the
+fast path never silently turns off.
+
+Why this module is longer than 500 lines: besides the thin link, it holds the python-can virtual-bus fast
+paths (signalled queue, batch sender) that issue #18 measured; they are about how this link reads and writes
+the bus and nothing else uses them.
 """
 
 from __future__ import annotations
@@ -59,6 +72,11 @@ class _LoopReader:
     close: Callable[[], None] = lambda: None
     take: Callable[[], can.Message | None] | None = None
 
+
+#: python-can releases whose ``virtual`` bus layout the fast paths were read against (see the docstring)
+VIRTUAL_LAYOUT_CHECKED = ("4.3", "4.4", "4.5", "4.6")
+#: the ``VirtualBus`` attributes they read
+VIRTUAL_BUS_ATTRIBUTES = ("channel", "queue", "channel_id", "receive_own_messages", "preserve_timestamps")
 
 #: frames the loop takes per wake-up before it lets other callbacks run (then it comes back at once)
 READ_BATCH = 256
@@ -223,8 +241,7 @@ def virtual_batch_sender(bus: can.BusABC) -> Callable[[list[can.Message]], None]
 
     if not isinstance(bus, virtual.VirtualBus):
         return None
-    attrs = ("channel", "queue", "channel_id", "receive_own_messages", "preserve_timestamps", "_open")
-    if not all(hasattr(bus, a) for a in attrs) or not isinstance(bus.channel, list):
+    if not all(hasattr(bus, a) for a in VIRTUAL_BUS_ATTRIBUTES) or not isinstance(bus.channel, list):
         return None
     vbus: Any = bus  # python-can's VirtualBus attributes, checked above
     channel: list[queue.Queue[can.Message]] = vbus.channel
@@ -234,10 +251,17 @@ def virtual_batch_sender(bus: can.BusABC) -> Callable[[list[can.Message]], None]
     clock = time.time
 
     def send_all(msgs: list[can.Message]) -> None:
-        if not vbus._open:
-            raise can.CanOperationError("Cannot operate on a closed bus")
         own = vbus.queue
-        targets = [q for q in channel if q is not own or own_too]
+        targets: list[queue.Queue[can.Message]] = []
+        open_ = False  # a bus that was shut down has taken its queue off the channel
+        for q in channel:
+            if q is own:
+                open_ = True
+                if not own_too:
+                    continue
+            targets.append(q)
+        if not open_:
+            raise can.CanOperationError("Cannot operate on a closed bus")
         full = False
         for msg in msgs:
             if not keep_time:

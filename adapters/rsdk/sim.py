@@ -14,6 +14,10 @@ gateway opens with python-can's own ``slcan`` interface as it would a CANable.
 
 Time: a simulator keeps its own, real time (``time.monotonic``), as the device it stands for does; the
 gateway's injected clock is not the device's.
+
+Why this module is longer than 500 lines: it holds the sans-I/O gimbal model (three axes, speed and position
+control, pushes, every command it answers) and its two transports (a virtual CAN node, an SLCAN adapter) with
+the simulator's entry points; the model is one device's behaviour on one clock.
 """
 
 from __future__ import annotations

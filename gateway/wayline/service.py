@@ -43,6 +43,10 @@ Choices where WAYLINE-NOTES is silent (a DJI dock's behaviour where known):
   same ``flight_id`` with its progress, and pause, recovery, return home and its end act on it. A mission
   the store does not know is reported as a task of its own (``flight_id`` ``adopted-<sn>-<ms>``). After
   a restart the waypoint indexes are the FC mission's (the plan that mapped them is not kept).
+
+Why this module is longer than 500 lines: it is the I/O of one task life cycle (prepare, download,
+execute, the run or the follow of an adopted mission, pause, recovery, return home, progress, the store),
+whose steps share the task book, the runs in flight and the files; the decisions live in task.py.
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ from typing import Any
 from adapters import families
 from adapters.wire.stream import BadFrame, FrameRules, StreamDecoder
 from gateway.clock import SYSTEM_CLOCK, Clock
-from gateway.codec_cli import json_safe
+from gateway.jsonsafe import json_safe
 
 __all__ = ["FrameTap", "LinkInspector", "Record", "inspectable"]
 

@@ -19,6 +19,10 @@ Must not know device protocols, Cloud API methods (``actions`` does) or Promethe
 
 Time: the web thread's own loop paces pages, pauses and the sign-in delay in real time (browsers see
 it); the gateway's clock (``Observability.clock``) keeps the console's sessions, uptime and timestamps.
+
+Why this module is longer than 500 lines: one route handler per endpoint of the console's HTTP API and its
+WebSocket push, on one server object whose life cycle and thread they share; the page's state and actions
+already live in state.py and actions.py.
 """
 
 from __future__ import annotations
@@ -39,7 +43,7 @@ from aiohttp import WSMsgType, web
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 
 from gateway.audit import audit
-from gateway.codec_cli import json_safe
+from gateway.jsonsafe import json_safe
 from gateway.observability import VERSION, Observability
 from gateway.settings import ConsoleSettings
 from gateway.web import actions
@@ -223,8 +227,10 @@ class WebServer:
             await runner.cleanup()
             raise
         self._runner = runner
-        sockets = getattr(site._server, "sockets", None) or []
-        self.port = int(sockets[0].getsockname()[1]) if sockets else port
+        # the bound port (port 0 picks a free one): aiohttp's public BaseRunner.addresses, one
+        # getsockname() per listening socket of its sites
+        addresses = runner.addresses
+        self.port = int(addresses[0][1]) if addresses else port
         self._has_pages = asyncio.Event()
         self._pump_task = asyncio.get_running_loop().create_task(self._pump(), name="console-push")
 

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from collections.abc import Iterable, Sequence
 from types import ModuleType
 from typing import Any, TextIO
 
 from adapters import families
+from gateway.jsonsafe import json_safe
 
 
 def _describe(family: str) -> ModuleType:
@@ -55,17 +55,6 @@ def _cli_options() -> list[families.CliOption]:
 def _options(ns: argparse.Namespace) -> dict[str, Any]:
     values = ((o.option, getattr(ns, o.option, None)) for o in _cli_options())
     return {name: value for name, value in values if value is not None}
-
-
-def json_safe(value: Any) -> Any:
-    """JSON has no NaN or infinity; a float register on the wire can hold them, so they print as strings."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return repr(value)
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_safe(v) for v in value]
-    return value
 
 
 def run_decode(ns: argparse.Namespace, stdin: TextIO, stdout: TextIO) -> int:

@@ -15,6 +15,10 @@ Passwords are read from the environment (``DJIGW_CONSOLE_PASSWORD``), never from
 where ``ps`` would show them.
 
 Time: reads the system clock itself (a separate process; the gateway's injected clock is the service's).
+
+Why this module is longer than 500 lines: ``send`` and ``monitor`` share the broker client, the request checks
+and the monitor's state model with its rich and plain views; ``fly``, ``status`` and the contract checks
+already live in modules of their own.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from gateway.codec_cli import is_assignment
+from gateway.cli.codec import is_assignment
 from gateway.mqtt import close_client
 
 if TYPE_CHECKING:
@@ -324,7 +328,7 @@ def _checked_data(ns: argparse.Namespace) -> dict[str, Any] | None:
         base = loaded
     if ns.no_check:
         return _merge(base, parse_fields(list(ns.fields or [])))
-    from gateway.contract_cli import check_request
+    from gateway.cli.contract import check_request
 
     check = check_request(ns.method, list(ns.fields or []), base, drc=ns.drc)
     if check.ok:
@@ -935,7 +939,7 @@ class EventAnswerer:
 def _ask_status(url: str, state: MonitorState, lock: threading.Lock, plain: bool) -> None:
     """Learn the topology from the gateway's ``/status`` (its ``update_topo`` went out before this
     monitor subscribed). Nobody there, or another gateway: nothing learnt, nothing said."""
-    from gateway.status_cli import fetch
+    from gateway.cli.status import fetch
 
     try:
         code, doc = fetch(url, "/status", 2.0)
@@ -977,7 +981,7 @@ def cmd_monitor(ns: argparse.Namespace) -> int:
         return EXIT_USAGE
     if plain:
         print(f"monitoring gateway {ns.gateway_sn} on {ns.broker} (Ctrl-C stops)", flush=True)
-    from gateway.status_cli import default_url
+    from gateway.cli.status import default_url
 
     status_url = default_url() if ns.status_url is None else ns.status_url
     if status_url:

@@ -16,14 +16,15 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from gateway.local_broker import LocalBroker, free_port, port_open
-from gateway.run_cli import (
+from gateway.cli import main as cli_main
+from gateway.cli.run import (
     SIM_AIRCRAFT_SN,
     SIM_GATEWAY_SN,
     SIM_GIMBAL_PAYLOAD_INDEX,
     SIM_GIMBAL_SN,
     SIM_ROBOT_SN,
 )
+from gateway.local_broker import LocalBroker, free_port, port_open
 
 DEFAULT_PORT = 1883
 TOKEN_FILE = Path(".console-token")
@@ -44,8 +45,6 @@ def console_token() -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from gateway.cli import main as cli_main
-
     url = os.environ.get("BROKER")
     broker: LocalBroker | None = None
     if url is None:

@@ -1,7 +1,16 @@
-"""The ``dji-gateway`` console script: one entry point, one sub-command per tool.
+"""The command-line front ends, and the ``dji-gateway`` console script: one entry point, one sub-command
+per tool (``python -m gateway.cli`` runs it too).
 
-Owns argument parsing only; each sub-command lives in its own module and is imported lazily so
-``dji-gateway decode`` starts fast and works without MQTT settings.
+This package is the operator's side of the gateway: ``run``/``simulate`` (:mod:`gateway.cli.run`),
+the MQTT console ``send``/``monitor`` (:mod:`gateway.cli.console`), ``methods``/``check``
+(:mod:`gateway.cli.contract`), ``fly`` (:mod:`gateway.cli.fly`), ``status`` (:mod:`gateway.cli.status`),
+``check-config`` (:mod:`gateway.cli.config`), ``decode``/``encode`` (:mod:`gateway.cli.codec`) and
+``make run``'s launcher (:mod:`gateway.cli.devrun`). The service (``gateway/`` outside this package)
+never imports it (``tests/test_import_graph.py``).
+
+This module owns argument parsing only; each sub-command's work lives in its module, and what it needs
+of the service is imported when it runs, so ``dji-gateway decode`` starts fast and works without MQTT
+settings.
 """
 
 from __future__ import annotations
@@ -12,7 +21,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from gateway import codec_cli, config_cli, console, contract_cli, fly, run_cli, status_cli
+from gateway.cli import codec, config, console, contract, fly, run, status
 from gateway.wayline import console_files as wayline_console
 
 
@@ -22,13 +31,13 @@ def build_parser() -> argparse.ArgumentParser:
         description="Bridge DJI R SDK gimbals, RoboMaster robots and Onboard SDK aircraft to the Cloud API.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    run_cli.add_parsers(sub)
+    run.add_parsers(sub)
     console.add_parsers(sub)
-    contract_cli.add_parsers(sub)
+    contract.add_parsers(sub)
     fly.add_parsers(sub)
-    status_cli.add_parsers(sub)
-    config_cli.add_parsers(sub)
-    codec_cli.add_parsers(sub)
+    status.add_parsers(sub)
+    config.add_parsers(sub)
+    codec.add_parsers(sub)
     wayline_console.add_parsers(sub)
 
     schema = sub.add_parser("schema", help="Cloud API contract tools")
@@ -99,7 +108,3 @@ def main(argv: Sequence[str] | None = None) -> int:
         # point stdout at devnull so the interpreter's final flush does not raise again)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -13,7 +13,6 @@ import contextlib
 import logging
 import signal
 import sys
-from collections.abc import Sequence
 from typing import Any
 
 from adapters import families
@@ -192,9 +191,3 @@ def cmd_simulate(ns: argparse.Namespace) -> int:
         return 2
     result: int = module.main(ns.args)
     return result
-
-
-def main(argv: Sequence[str] | None = None) -> int:  # pragma: no cover - thin alias for python -m
-    from gateway.cli import main as cli_main
-
-    return cli_main(argv)

@@ -7,7 +7,7 @@ and a request's problems in words — an unknown method with the closest names, 
 the fields the method takes, every validation error as ``data.x: Input should be …``. Owns turning
 ``field=value`` text into typed values *by the contract*: a field the contract says is a string keeps
 its text (``payload_index=1001`` stays ``"1001"``), other values are JSON when they parse.
-Knows nothing of MQTT, devices or bytes; the console (``gateway.console``) publishes what passes here.
+Knows nothing of MQTT, devices or bytes; the console (``gateway.cli.console``) publishes what passes here.
 """
 
 from __future__ import annotations

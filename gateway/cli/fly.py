@@ -11,7 +11,7 @@ delay) after the last repeat; Space zeroes every axis at once, ``x`` is an emerg
 
 :class:`KeyDecoder` (bytes and time in, key names out) and :class:`Sticks` (keys and time in, stick
 values out) are sans-I/O and tested alone; :func:`cmd_fly` is the thin loop around them (termios, the
-broker link of :mod:`gateway.console`, rich). Knows nothing of devices: what the sticks do is the
+broker link of :mod:`gateway.cli.console`, rich). Knows nothing of devices: what the sticks do is the
 gateway's business (``drc.*`` settings, docs/drc.md).
 
 Time: reads the system clock itself (a separate process; the gateway's injected clock is the service's).
@@ -32,7 +32,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-from gateway.console import (
+from gateway.cli.console import (
     EXIT_ERROR_RESULT,
     EXIT_OK,
     EXIT_USAGE,

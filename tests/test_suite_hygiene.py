@@ -1,0 +1,65 @@
+"""What keeps the suite fast and honest in parallel: the example counts that matter survive every
+Hypothesis profile (the quick one included), and ``make test`` runs the suite under pytest-xdist."""
+
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+from hypothesis import settings
+
+from tests.test_drc_session import DrcSessionMachine
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_the_drc_state_machine_keeps_its_2000_examples_under_every_profile() -> None:
+    assert DrcSessionMachine.TestCase.settings.max_examples >= 2000
+    for name in ("default", "ci", "quick"):
+        profile = settings.get_profile(name)
+        # a profile sets the others' count; the state machine's own settings are not derived from it
+        assert settings(profile, max_examples=2000).max_examples == 2000
+
+
+def test_the_ci_profile_is_reproducible() -> None:
+    ci = settings.get_profile("ci")
+    assert ci.derandomize and ci.database is None
+    assert ci.max_examples >= settings.get_profile("default").max_examples
+
+
+def test_make_test_runs_the_suite_in_parallel() -> None:
+    makefile = (ROOT / "Makefile").read_text()
+    recipe = re.search(r"^test:.*\n\t(.+)$", makefile, re.MULTILINE)
+    assert recipe is not None and "-n $(TEST_WORKERS)" in recipe.group(1)
+    workers = re.search(r"^TEST_WORKERS \?= (\d+)$", makefile, re.MULTILINE)
+    assert workers is not None and int(workers.group(1)) >= 2
+
+
+#: Modules excused from the rule (none: every long module says why)
+SIZE_EXEMPT: tuple[str, ...] = ()
+
+
+def test_a_module_over_500_lines_says_why_at_its_top() -> None:
+    """A long module is a smell unless its docstring says why it is one piece (issue #32)."""
+    missing = []
+    for package in ("schemas", "adapters", "gateway"):
+        for path in sorted((ROOT / package).rglob("*.py")):
+            rel = path.relative_to(ROOT).as_posix()
+            text = path.read_text()
+            if text.count("\n") <= 500 or (SIZE_EXEMPT and rel.startswith(SIZE_EXEMPT)):
+                continue
+            doc = ast.get_docstring(ast.parse(text)) or ""
+            if "Why this module is longer than 500 lines" not in doc:
+                missing.append(rel)
+    assert missing == []
+
+
+def test_every_module_with_a_shared_fixture_runs_as_one_group() -> None:
+    """A module- or class-scoped fixture split over parallel workers starts once per worker (a simulated
+    gateway, a browser, a NATS cluster): such modules are listed in conftest's SHARED_FIXTURE_MODULES."""
+    from tests.conftest import SHARED_FIXTURE_MODULES
+
+    shared = re.compile(r"scope=[\"'](module|class|package)[\"']")
+    found = {p.name for p in (ROOT / "tests").glob("test_*.py") if shared.search(p.read_text())}
+    assert found == set(SHARED_FIXTURE_MODULES)
