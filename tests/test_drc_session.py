@@ -22,6 +22,7 @@ from __future__ import annotations
 import itertools
 from typing import Any
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, precondition, rule
@@ -380,7 +381,7 @@ DrcSessionMachine.TestCase.settings = settings(
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow],
 )
-TestDrcSession = DrcSessionMachine.TestCase
+TestDrcSession = pytest.mark.slow(DrcSessionMachine.TestCase)
 
 
 # ------------------------------------------------------------------------------------------ examples

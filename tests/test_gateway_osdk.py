@@ -112,6 +112,7 @@ def test_takeoff_fields_the_flight_controller_cannot_honour_are_refused(rig: dic
     assert fc.inspect(lambda m: (m.actions["flight_task"], m.go_home_altitude_m)) == (1, 45.0)
 
 
+@pytest.mark.slow
 def test_java_sdk_takeoff_fields_are_honoured_or_refused(rig: dict[str, Any]) -> None:
     """Issue #17: the Cloud API 1.x fields DJI's Java Cloud SDK sends with takeoff_to_point. What the FC can
     do is done (fixed-height commander mode flies the route at commander_flight_height; the commander
@@ -158,6 +159,7 @@ def test_activation_topology_and_osd(rig: dict[str, Any]) -> None:
     assert osd["battery"]["capacity_percent"] > 0
 
 
+@pytest.mark.slow
 def test_takeoff_fly_to_and_stop(rig: dict[str, Any]) -> None:
     fc, cloud = rig["fc"], rig["cloud"]
     # without flight authority the cloud may not fly

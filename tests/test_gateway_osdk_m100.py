@@ -62,6 +62,7 @@ def m100(broker: LocalBroker) -> Iterator[dict[str, Any]]:
         endpoint.stop()
 
 
+@pytest.mark.slow
 def test_an_m100_takes_off_flies_to_a_point_and_never_goes_home(m100: dict[str, Any]) -> None:
     fc, cloud = m100["fc"], m100["cloud"]
     state = cloud.wait_for(f"{SN}/state", lambda b: "x_hardware" in b["data"], timeout=5)[-1]["data"]
