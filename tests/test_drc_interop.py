@@ -153,6 +153,7 @@ def test_drc_driven_only_by_stick_control_moves_the_aircraft_and_the_gimbal(sim:
     cloud, broker = sim["cloud"], sim["broker"]
     pi = SIM_GIMBAL_PAYLOAD_INDEX
     assert cloud.service("payload_authority_grab", {"payload_index": pi})["data"]["result"] == 0
+    assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0  # sticks fly the aircraft too
     link = {"address": f"{broker.host}:{broker.port}", "client_id": "drc-interop", "username": "u",
             "password": "p", "expire_time": int(time.time()) + 600, "enable_tls": False}  # fmt: skip
     enter = {"tid": "enter-1", "bid": "b-enter", "timestamp": int(time.time() * 1000),

@@ -395,11 +395,12 @@ class AircraftAdapter(SupervisedAdapter):
                 ResultCode.BUSY, f"{what}{name} is flying: stop it first (or return home, which does)"
             )
 
-    async def stop_current_mission(self) -> None:
+    async def stop_current_mission(self) -> bool:
         """Stop whatever task the FC flies for the gateway (a mission: ``03 12`` cancel; the FC's go home:
         exit go home) and end it canceled, told to whoever follows it. A FC that flies no mission (0xD4)
-        has nothing left to stop: the task ends all the same."""
+        has nothing left to stop: the task ends all the same. Returns whether the FC was flying one."""
         task = self.mission
+        flying = True
         if task is not None and task.kind == "go_home" and task.live:
             await self.flight_task("exit_go_home")  # the FC hovers where it is
         else:
@@ -410,6 +411,7 @@ class AircraftAdapter(SupervisedAdapter):
                 # refusal is the answer
                 if exc.detail.get("ack") != MISSION_NOT_RUNNING:
                     raise
+                flying = False
             self.mission_stopped()
         if task is not None and task.live:
             task.finished = task.canceled = True  # no wayline_ok for a cancelled task
@@ -418,6 +420,7 @@ class AircraftAdapter(SupervisedAdapter):
                 if self._mission_task is not None:
                     self._mission_task.cancel()
                 self._progress(task, "wayline_cancel", task.reached - task.offset)
+        return flying
 
     def mission_started(self, task: Task) -> None:
         """The FC acknowledged the start of ``task``'s mission: from now on it may disagree."""

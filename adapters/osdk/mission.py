@@ -253,8 +253,8 @@ class MissionHost(Protocol):
     def require_no_mission(self) -> None:
         """Raise while a task is live (before anything is uploaded)."""
 
-    async def stop_current_mission(self) -> None:
-        """Stop whatever task the FC flies for the gateway and end it canceled."""
+    async def stop_current_mission(self) -> bool:
+        """Stop whatever task the FC flies for the gateway and end it canceled; whether it flew one."""
 
     def mission_stopped(self) -> None:
         """The FC acknowledged a mission stop: it flies none from now (whatever its last push said)."""

@@ -204,10 +204,11 @@ class OsdkWayline:
         await self.adapter.ground_station("wp_pause_resume", {"pause": 1})
         self.paused = False
 
-    async def cancel(self) -> None:
+    async def cancel(self) -> bool:
         """Stop the mission: the FC brakes and hovers where it is (the adapter's
-        :meth:`stop_current_mission`; a FC that flies none has nothing left to stop)."""
-        await self.adapter.stop_current_mission()
+        :meth:`stop_current_mission`; a FC that flies none has nothing left to stop). Returns whether the
+        FC was flying it."""
+        return await self.adapter.stop_current_mission()
 
     def return_home_plan(self, rth_altitude: float) -> list[tuple[float, float, float]] | None:
         """The way home the gateway flies: up to ``rth_altitude`` over the aircraft, over home at that

@@ -354,10 +354,14 @@ class WaylineService:
             self._rth = None
             return ResultCode.BUSY, {"reason": "the aircraft is not returning home"}
         try:
-            await aircraft.wayline.cancel()
+            flying = await aircraft.wayline.cancel()
         except (DeviceRejected, DeviceTimeout, DeviceNotConnected) as exc:
             return ResultCode.BUSY, {"reason": str(exc)[:300]}
         self._rth = None
+        if not flying:  # the FC says no return is flying (it ended: over home, landing)
+            return ResultCode.BUSY, {
+                "reason": "the aircraft is not returning home (the flight controller flies none)"
+            }
         return ResultCode.SUCCESS, None
 
     # -- a run -----------------------------------------------------------------------------------
