@@ -381,7 +381,8 @@ DrcSessionMachine.TestCase.settings = settings(
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow],
 )
-TestDrcSession = pytest.mark.slow(DrcSessionMachine.TestCase)
+# CPU-bound (2,000 examples): beside parallel workers on 2 cores it needs more than the suite's 120 s default
+TestDrcSession = pytest.mark.timeout(600)(pytest.mark.slow(DrcSessionMachine.TestCase))
 
 
 # ------------------------------------------------------------------------------------------ examples
