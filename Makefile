@@ -81,7 +81,7 @@ lint: venv
 	$(VENV)/bin/mypy schemas adapters gateway
 
 test: venv mosquitto nats chromium lint
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder
 
 bench: venv mosquitto nats
 	$(PY) bench/run.py

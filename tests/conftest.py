@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import uuid
 from collections.abc import Iterator
+from typing import Any
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -65,9 +66,10 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
         terminalreporter.write_line(f"fuzz: {total} cases ({parts}), {crashes} crashes")
 
 
-# -- scheduling for parallel runs (make test: pytest -n 4 --dist loadgroup) -------------------------------
+# -- scheduling for parallel runs (make test: pytest -n 6 --dist loadgroup) -------------------------------
 #: Modules whose fixtures are module- or class-scoped (a simulated gateway, a browser, a NATS cluster): their
-#: tests stay on one worker, so the fixture starts once per run, not once per worker.
+#: tests run on one worker, in file order, so the fixture starts once per run, not once per worker (and a
+#: test that leans on what an earlier one left in that fixture still finds it).
 SHARED_FIXTURE_MODULES = frozenset(
     {
         "test_brokers_cluster.py",
@@ -97,14 +99,35 @@ def _rank(item: pytest.Item) -> int:
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Longest first, so parallel workers start the long waits early and fill the gaps with short tests
-    (the run ends when its last long test does); a module with shared fixtures is one group, kept
-    together and ranked by its longest test. The order within a module is kept; a test never depends on
-    the order tests run in (CONTRIBUTING.md)."""
+    (the run ends when its last long test does); a module with shared fixtures is ranked by its longest
+    test and stays in one piece. The order within a module is kept; a test never depends on the order
+    tests run in (CONTRIBUTING.md)."""
     modules: dict[str, int] = {}
     for item in items:
-        name = item.path.name
-        if name in SHARED_FIXTURE_MODULES:
-            item.add_marker(pytest.mark.xdist_group(name))
-            modules[name] = min(modules.get(name, 2), _rank(item))
+        if item.path.name in SHARED_FIXTURE_MODULES:
+            modules[item.path.name] = min(modules.get(item.path.name, 2), _rank(item))
     order = {id(item): i for i, item in enumerate(items)}
     items.sort(key=lambda it: (modules.get(it.path.name, _rank(it)), order[id(it)]))
+
+
+def shared_fixture_scope(nodeid: str) -> str:
+    """The unit a parallel run hands to one worker: the whole module for SHARED_FIXTURE_MODULES, else
+    the test alone."""
+    path = nodeid.split("::", 1)[0]
+    return path if path.rsplit("/", 1)[-1] in SHARED_FIXTURE_MODULES else nodeid
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """``--dist loadgroup``: pytest-xdist's scope scheduler with :func:`shared_fixture_scope` as the scope.
+    (xdist 3.8's own loadgroup renames ``item._nodeid``, which pytest 9 no longer reads: its groups fell
+    apart and a module's tests ran on several workers. ``_split_scope`` is how xdist's own loadscope
+    and loadfile schedulers are made; tests/test_suite_hygiene.py checks it still groups.)"""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ModuleGroups(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return shared_fixture_scope(nodeid)
+
+    return ModuleGroups(config, log)

@@ -63,3 +63,14 @@ def test_every_module_with_a_shared_fixture_runs_as_one_group() -> None:
     shared = re.compile(r"scope=[\"'](module|class|package)[\"']")
     found = {p.name for p in (ROOT / "tests").glob("test_*.py") if shared.search(p.read_text())}
     assert found == set(SHARED_FIXTURE_MODULES)
+
+
+def test_the_parallel_scheduler_keeps_a_shared_fixture_module_together() -> None:
+    from xdist.scheduler import LoadScopeScheduling
+
+    from tests.conftest import shared_fixture_scope
+
+    assert callable(getattr(LoadScopeScheduling, "_split_scope", None)), "xdist moved its scope hook"
+    together = {shared_fixture_scope(f"tests/test_drc_interop.py::test_{n}") for n in ("a", "b[x]")}
+    assert together == {"tests/test_drc_interop.py"}
+    assert shared_fixture_scope("tests/test_outage.py::test_a") == "tests/test_outage.py::test_a"
