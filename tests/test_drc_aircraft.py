@@ -74,6 +74,8 @@ def rig(private_broker: LocalBroker) -> Iterator[dict[str, Any]]:
         adapter = gw.app.devices.by_sn(SN)
         asyncio.run_coroutine_threadsafe(adapter.flight_task("takeoff"), gw.loop).result(5)  # take off
         wait_until(lambda: fc.inspect(lambda m: m.in_air and m.display_mode == 6), 10, what="airborne")
+        # and the gateway has heard that the FC's take-off is over: sticks during it are refused
+        wait_until(lambda: adapter.autonomous_task() is None, 10, what="the take-off over, for the gateway")
         link = {"address": f"127.0.0.1:{drc_broker.port}", "client_id": "drc-gw", "username": DRC_USER,
                 "password": DRC_PASSWORD, "expire_time": int(time.time()) + 600,
                 "enable_tls": False}  # fmt: skip

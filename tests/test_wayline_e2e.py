@@ -265,7 +265,7 @@ def test_three_waypoint_route_flies_and_ends_ok(rig: dict[str, Any]) -> None:
     # a fresh URL was asked for before the run (flighttask_resource_get on requests, bid = flight_id)
     asked = [a for a in rig["answerer"].asked if a["method"] == "flighttask_resource_get"]
     assert asked and asked[0]["data"] == {"flight_id": flight} and asked[0]["bid"] == flight
-    # progress at >= 1 Hz while flying: no gap longer than 1.5 s between in_progress events
+    # progress at >= 1 Hz while flying: no stalled report between in_progress events
     stamps = [e["timestamp"] for e in events if e["data"]["output"]["status"] == "in_progress"]
     # sent each second by design: a silence over 2.5 s is a stalled report, not a loaded machine's jitter
     assert max(b - a for a, b in itertools.pairwise(stamps)) <= 2500
