@@ -275,9 +275,9 @@ def test_after_a_release_no_control_frame_is_sent_and_the_log_says_released(
     released = moves()
     gw.stop()  # the shutdown: the app's stop_motion, then the adapter's stop
     # a marker after the gateway's last byte on the same pty: once the FC has read it, it has read all
+    seen = fc.inspect(lambda m: m.actions["get_version"])  # before the write: the FC may read it at once
     with serial.serial_for_url(rig["pty"].path, baudrate=230400, timeout=0.1) as port:
         port.write(encode_command(0x00, 0x00, b"\x00", 2, 4242))
-        seen = fc.inspect(lambda m: m.actions["get_version"])
         wait_until(lambda: fc.inspect(lambda m: m.actions["get_version"]) > seen, 5, what="the marker")
     assert moves() == released  # no 01 03 after the release, none at shutdown
     logged = [(r.levelno, r.getMessage()) for r in caplog.records if r.name == "gateway.northbound"]
