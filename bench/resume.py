@@ -1,7 +1,8 @@
 """Fast resume: how soon telemetry and services flow again after the broker comes back from an outage.
 
 The gateway (in this process, default reconnect settings: ``probe_interval`` 0.5 s) drives a simulated
-gimbal over a virtual CAN bus with osd every 0.5 s, against a private mosquitto. The broker is stopped
+gimbal over a virtual CAN bus with osd every 0.5 s, against a private mosquitto (persistent sessions,
+QoS 0 queued, as a cloud would run it). The broker is stopped
 for 2, 6 and 15 s (``--quick``: 2 s) and started again on the same port. A cloud client that reconnects
 every 20 ms records every osd; once it is back it sends a ``camera_photo_take`` with a fresh tid every
 50 ms until one is answered. Figures, measured from the moment the broker listens again:
@@ -50,7 +51,11 @@ class _Cloud:
         self._last: dict[str, int] = {}
         self.replies: dict[str, float] = {}
         self._lock = threading.Lock()
-        self.client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"resume-{uuid.uuid4().hex[:6]}")
+        # a persistent session, as a real cloud keeps: what the gateway publishes between its own
+        # reconnect and the cloud's (whichever comes first) waits for the cloud at the broker
+        self.client = paho.Client(
+            CallbackAPIVersion.VERSION2, client_id=f"resume-{uuid.uuid4().hex[:6]}", clean_session=False
+        )
         self.client.reconnect_delay_set(0.02, 0.02)
         self.client.on_connect = lambda c, u, f, rc, p: c.subscribe(
             [("thing/product/+/osd", 0), (f"thing/product/{GW}/services_reply", 1)]
@@ -94,7 +99,8 @@ def measure(outages: list[float], settle: float = 2.0) -> list[Resume]:
     from tests.support import GatewayThread, gateway_settings
 
     channel = f"djigw-resume-{uuid.uuid4().hex[:8]}"
-    broker = LocalBroker().start()
+    # the cloud's session survives the broker's restart (autosaved every second), QoS 0 osd included
+    broker = LocalBroker(persistence=True, extra_config="queue_qos0_messages true").start()
     sim = GimbalCanSim(interface="virtual", channel=channel).start()
     device = {"type": "rsdk", "sn": "RSDK-RES-1", "interface": "virtual", "channel": channel}
     settings = gateway_settings(
@@ -109,7 +115,7 @@ def measure(outages: list[float], settle: float = 2.0) -> list[Resume]:
         while not cloud.osd and time.monotonic() < deadline:
             time.sleep(0.05)
         for outage in outages:
-            time.sleep(settle)
+            time.sleep(max(settle, 1.2))  # (mosquitto's autosave has the cloud's session on disk)
             broker.stop(kill=True)
             down_wall = time.time()
             time.sleep(outage)
