@@ -117,8 +117,10 @@ def measure(outages: list[float], settle: float = 2.0) -> list[Resume]:
         for outage in outages:
             time.sleep(max(settle, 1.2))  # (mosquitto's autosave has the cloud's session on disk)
             broker.stop(kill=True)
+            down = time.monotonic()
             down_wall = time.time()
             time.sleep(outage)
+            up_wall_ms = time.time() * 1000  # osd produced before this was produced in the outage
             broker.start()
             back = time.monotonic()
             back_wall_ms = time.time() * 1000
@@ -139,7 +141,8 @@ def measure(outages: list[float], settle: float = 2.0) -> list[Resume]:
             deadline = time.monotonic() + 10
             while time.monotonic() < deadline:
                 with cloud._lock:
-                    after = [(at, ts) for at, ts in cloud.osd if at >= back]
+                    # (what the gateway flushed can reach the cloud before start() has seen the port open)
+                    after = [(at, ts) for at, ts in cloud.osd if at >= down]
                 if any(ts >= back_wall_ms for _, ts in after):
                     break
                 time.sleep(0.05)
@@ -150,11 +153,12 @@ def measure(outages: list[float], settle: float = 2.0) -> list[Resume]:
                     f"{cloud.out_of_order} osd delivered out of order after a {outage} s outage"
                 )
             fresh = [at for at, ts in after if ts >= back_wall_ms]
-            late = sum(1 for _, ts in after if down_wall * 1000 < ts < back_wall_ms)
+            late = sum(1 for _, ts in after if down_wall * 1000 < ts < up_wall_ms)
             out.append(
                 Resume(
                     outage=outage,
-                    telemetry=min(at for at, _ in after) - back,
+                    # 0 when it arrived before start() saw the port open (the gateway's probe was first)
+                    telemetry=max(0.0, min(at for at, _ in after) - back),
                     fresh_telemetry=(min(fresh) - back) if fresh else float("nan"),
                     services=answered - back,
                     buffered_delivered=late,
