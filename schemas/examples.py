@@ -1074,6 +1074,19 @@ GATEWAY_EXAMPLES: tuple[GatewayExample, ...] = (
         {**_ENV, "timestamp": _TS, "gateway": _GW, "data": {"rth_altitude": {"result": 399001}}},
         "The property is not writable on this device.",
     ),
+    GatewayExample(
+        TopicKind.EVENTS,
+        "cloud_control_auth_notify",
+        {
+            **_ENV,
+            "timestamp": _TS,
+            "gateway": _GW,
+            "need_reply": 0,
+            "method": "cloud_control_auth_notify",
+            "data": {"result": 0, "output": {"status": "ok"}},
+        },
+        "The operator (or the allow-list) granted cloud control; bid is the request's (DJI RC Plus 2 page).",
+    ),
 )
 
 _FLIGHT = "2b1e6a3c-1d0f-4a7e-9d7a-5b2f1c3e4d5f"
@@ -1298,5 +1311,23 @@ CLOUD_SHAPES: tuple[CloudShape, ...] = (
             "hsi_frequency": 1,
         },
         f"{_JAVA_SDK} DrcModeEnterRequest/DrcModeMqttBroker: expire_time 1234567890..9999999999",
+    ),
+    CloudShape(
+        TopicKind.SERVICES,
+        "cloud_control_auth_request",
+        '{"bid": "5d0c3c9e-3f51-4a8e-9a8f-7c1f0e2d4b6a", "data": {"control_keys": ["flight"], '
+        '"user_callsign": "WUDIZHR", "user_id": "123456"}, "method": "cloud_control_auth_request", '
+        '"tid": "8e2f6a1b-0c3d-4e5f-9a7b-1c2d3e4f5a6b", "timestamp": 1654070968655}',
+        {"user_id": "123456", "user_callsign": "WUDIZHR", "control_keys": ["flight"]},
+        "wudizhr/DJI_Cloud_API_demo (an RC Plus 2 client): sent before drc_mode_enter, no gateway field",
+    ),
+    CloudShape(
+        TopicKind.SERVICES,
+        "cloud_control_release",
+        '{"bid": "xxxxxxxx-xxxx-xxxx-xxxx-xxxxxxxxxx", "data": {"control_keys": ["flight"]}, '
+        '"method": "cloud_control_release", "tid": "xxxxxxxx-xxxx-xxxx-xxxx-xxxxxxxxxx", '
+        '"timestamp": 1704038400000}',
+        {"control_keys": ["flight"]},
+        "DJI Cloud API docs, RC Plus 2 / RC Pro DRC page: the release example as published",
     ),
 )

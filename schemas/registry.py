@@ -31,6 +31,12 @@ from pydantic import Field, PlainValidator, TypeAdapter
 from pydantic_core import PydanticCustomError
 
 from .base import EXTENSION_PREFIX, ContractModel, InboundModel, OutboundModel
+from .cloud_control import (
+    CloudControlAuthNotify,
+    CloudControlAuthRequest,
+    CloudControlRelease,
+    CloudControlReply,
+)
 from .drc import (
     DelayInfoPush,
     DrcBatteriesInfoPush,
@@ -237,6 +243,31 @@ WAYLINE_METHODS: tuple[MethodSpec, ...] = (
         FlighttaskResourceGet,
         FlighttaskResourceGetReply,
         "Ask the cloud for a fresh KMZ URL",
+    ),
+)
+
+#: Cloud-control authorisation of the RC Plus 2 / RC Pro (DJI Pilot 2 "DRC" page; docs/cloud-api.md).
+CLOUD_CONTROL_METHODS: tuple[MethodSpec, ...] = (
+    _dji(
+        _S,
+        "cloud_control_auth_request",
+        CloudControlAuthRequest,
+        CloudControlReply,
+        "Request cloud control authorization (RC Plus 2)",
+    ),
+    _dji(
+        _S,
+        "cloud_control_release",
+        CloudControlRelease,
+        CloudControlReply,
+        "Release cloud control (RC Plus 2)",
+    ),
+    _dji(
+        _E,
+        "cloud_control_auth_notify",
+        CloudControlAuthNotify,
+        InboundResult,
+        "Authorization result notification (RC Plus 2)",
     ),
 )
 
@@ -447,5 +478,6 @@ class Registry:
 
 
 def default_registry() -> Registry:
-    """A new registry holding every method of seed 003 (and update_topo) and the wayline methods."""
-    return Registry((*SEED_METHODS, *WAYLINE_METHODS))
+    """A new registry holding every method of seed 003 (and update_topo), the wayline methods and
+    cloud-control authorisation."""
+    return Registry((*SEED_METHODS, *WAYLINE_METHODS, *CLOUD_CONTROL_METHODS))

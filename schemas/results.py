@@ -11,6 +11,8 @@ Codes this project reserves (DJI's catalogue does not use the 399xxx block or 59
 - 399001 ``METHOD_NOT_SUPPORTED``: the method is in the contract, but this device cannot do it (a gimbal
   asked to take off).
 - 399002 ``UNKNOWN_METHOD``: no model for this method on this topic (neither the seed nor an extension).
+- 399003 ``CLOUD_CONTROL_NOT_GRANTED``: live control needs cloud control (``cloud_control_auth_request``
+  accepted by the allow-list or the operator) and this cloud user does not hold it (docs/cloud-api.md).
 - 599001 ``INTERNAL_ERROR``: the gateway failed (a bug or an unexpected exception); never a device error.
 - 336000 + ack: the Onboard SDK ground-station ACK family (seed 004), reported as ``ground_station_ack(ack)``
   so the raw ACK survives the trip to the cloud (ack 0 is success and maps to 0).
@@ -73,6 +75,7 @@ class ResultCode(enum.IntEnum):
     DRC_LINK_REFUSED = 514304, "DRC link refused."
     METHOD_NOT_SUPPORTED = 399001, "dji-gateway: this device does not support this method."
     UNKNOWN_METHOD = 399002, "dji-gateway: unknown method for this topic."
+    CLOUD_CONTROL_NOT_GRANTED = 399003, "dji-gateway: cloud control is not granted to this cloud user."
     INTERNAL_ERROR = 599001, "dji-gateway: internal error."
 
 

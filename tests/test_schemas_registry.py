@@ -74,6 +74,9 @@ SEED_METHOD_NAMES = {
 
 #: Newer DRC methods from DJI's Cloud API docs (Dock 2/3, RC Plus 2), beyond seed 003 (docs/cloud-api.md).
 DJI_DOC_METHOD_NAMES: dict[TopicKind, set[str]] = {
+    # cloud-control authorisation (RC Plus 2 / RC Pro "DRC" page: docs/cloud-api.md)
+    TopicKind.SERVICES: {"cloud_control_auth_request", "cloud_control_release"},
+    TopicKind.EVENTS: {"cloud_control_auth_notify"},
     TopicKind.DRC_DOWN: {"stick_control", "drc_gimbal_reset"},
     TopicKind.DRC_UP: {
         "stick_control",
@@ -110,11 +113,13 @@ def test_registry_holds_every_seed_method() -> None:
     for kind, names in SEED_METHOD_NAMES.items():
         extra = DJI_DOC_METHOD_NAMES.get(kind, set()) | WAYLINE_METHOD_NAMES.get(kind, set())
         assert set(registry.methods(kind)) == names | extra
-    for kind in (TopicKind.DRC_DOWN,):
+    for kind in (TopicKind.DRC_DOWN, TopicKind.SERVICES, TopicKind.EVENTS):
         for method in DJI_DOC_METHOD_NAMES[kind]:
             assert registry.spec(kind, method).source.startswith("DJI Cloud API docs § "), method
-    services = SEED_METHOD_NAMES[TopicKind.SERVICES] | WAYLINE_METHOD_NAMES[TopicKind.SERVICES]
-    events = SEED_METHOD_NAMES[TopicKind.EVENTS] | WAYLINE_METHOD_NAMES[TopicKind.EVENTS]
+    services, events = (
+        SEED_METHOD_NAMES[k] | WAYLINE_METHOD_NAMES[k] | DJI_DOC_METHOD_NAMES[k]
+        for k in (TopicKind.SERVICES, TopicKind.EVENTS)
+    )
     assert set(registry.methods(TopicKind.SERVICES_REPLY)) == services
     assert set(registry.methods(TopicKind.EVENTS_REPLY)) == events
     assert set(registry.methods(TopicKind.REQUESTS)) == {"flighttask_resource_get"}
