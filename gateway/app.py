@@ -19,6 +19,7 @@ from adapters import families
 from adapters.base import Adapter
 from gateway import logcontext
 from gateway.clock import SYSTEM_CLOCK, Clock
+from gateway.cloud_control import CloudControl
 from gateway.cloud_requests import CloudRequests
 from gateway.devices import DeviceTable
 from gateway.dispatcher import Dispatcher
@@ -82,6 +83,7 @@ class GatewayApp:
         self.northbound: Northbound | None = None
         self.drc: DrcController | None = None
         self.wayline: WaylineService | None = None  # flighttask_* / return_home* (gateway/wayline)
+        self.cloud_control: CloudControl | None = None  # cloud_control_auth_request / _release
         self.store: StateStore | None = None  # what must outlive the process (gateway/store.py)
         self.observability: Observability | None = None  # /metrics, /healthz, /status, / (None: off)
         self.web: WebServer | None = None  # the aiohttp server (its own thread) that serves them
@@ -150,6 +152,16 @@ class GatewayApp:
             require_authority=s.dispatcher.require_authority,
             store=store,
         )
+        cloud_control = self.cloud_control = CloudControl(
+            settings=s.cloud_control,
+            clock=self.clock,
+            publish_event=lambda method, data, need_reply, bid: nb.event(
+                gw, method, data, need_reply, bid=bid
+            ),
+            metrics=self.metrics,
+            on_change=drc.cloud_control_changed,
+        )
+        drc.cloud_control = cloud_control.auth
         # the will and the clean goodbye are the same: a topology with no sub-devices (all offline)
         offline = (topic(TopicKind.STATUS, gw), nb.topology(offline=True))
         bridge.set_will(*offline)
@@ -166,6 +178,7 @@ class GatewayApp:
             drc=drc,
             wayline=wayline,
             on_requests_reply=requests.answer,
+            cloud_control=cloud_control,
         )
         self.drc.call_service = self.dispatcher.call_local  # drc_gimbal_reset runs as gimbal_reset
         for adapter in self.devices:
@@ -228,6 +241,8 @@ class GatewayApp:
         await asyncio.gather(*(a.stop_motion() for a in self.devices), return_exceptions=True)
         if self.wayline is not None:
             await self.wayline.stop()
+        if self.cloud_control is not None:
+            self.cloud_control.stop()
         for adapter in self.devices:  # what the operator who pressed Ctrl-C needs to know
             log.info("%s", left_doing(adapter))
         consumer.cancel()

@@ -99,6 +99,15 @@ class LiveControl(Protocol):
     async def exit(self) -> tuple[int, dict[str, Any] | None]: ...
 
 
+class CloudControlCalls(Protocol):
+    """What the dispatcher asks of cloud-control authorisation (:class:`gateway.cloud_control.CloudControl`):
+    the services it answers, each with the request's ``bid`` (its notify event carries it)."""
+
+    methods: frozenset[str]
+
+    async def call(self, method: str, data: Any, bid: str) -> tuple[int, dict[str, Any] | None]: ...
+
+
 class WaylineCalls(Protocol):
     """What the dispatcher asks of wayline tasks (:class:`gateway.wayline.service.WaylineService`): the
     services it answers, each as (result code, output)."""
@@ -131,6 +140,7 @@ class Dispatcher:
         drc: LiveControl | None = None,
         wayline: WaylineCalls | None = None,
         on_requests_reply: Callable[[Any], None] | None = None,
+        cloud_control: CloudControlCalls | None = None,
     ) -> None:
         self.gateway_sn = gateway_sn
         self.registry = registry
@@ -144,6 +154,7 @@ class Dispatcher:
         self.drc = drc  # gateway.drc.DrcController (enter/exit), None: live control unavailable
         #: gateway.wayline.service.WaylineService (flighttask_*, return_home*), None: no wayline tasks
         self.wayline = wayline
+        self.cloud_control = cloud_control  # gateway.cloud_control.CloudControl, None: not offered
         #: told every valid requests_reply (gateway.cloud_requests.CloudRequests.answer)
         self.on_requests_reply = on_requests_reply
         self._replies: OrderedDict[str, _Cached] = OrderedDict()
@@ -318,6 +329,8 @@ class Dispatcher:
         try:
             if method in _AUTHORITY_METHODS:
                 return await self._grab_authority(method, data)
+            if self.cloud_control is not None and method in self.cloud_control.methods:
+                return await self.cloud_control.call(method, data, request.bid)
             if method in _DRC_METHODS and self.drc is not None:
                 return await (self.drc.enter(data) if method == "drc_mode_enter" else self.drc.exit())
             if self.wayline is not None and method in self.wayline.methods:

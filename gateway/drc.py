@@ -64,6 +64,7 @@ from adapters.base import Adapter, AircraftPose, Domain
 from gateway import drc_session as ds
 from gateway.audit import audit
 from gateway.clock import Clock, SystemClock
+from gateway.control_auth import ControlAuth
 from gateway.devices import DeviceTable
 from gateway.metrics import Metrics
 from gateway.mqtt import MqttBridge
@@ -293,6 +294,10 @@ class DrcController:
         #: runs a services request (bytes) as the cloud's would be and returns its reply: the dispatcher's
         #: ``call_local``, set by the app (drc_gimbal_reset is the gimbal_reset service over drc/down)
         self.call_service: Callable[[bytes], Awaitable[bytes]] | None = None
+        #: cloud-control authorisation (set by the app): in force, enter needs a grant and the session's
+        #: sticks belong to the user who held it when entering (``_owner``); gateway/control_auth.py
+        self.cloud_control: ControlAuth | None = None
+        self._owner: str | None = None
         self._forwarding: set[asyncio.Task[None]] = set()
         self._forwarded = 0  # drc_gimbal_reset carried out (a tid for one without a seq)
         self.cmd_delay_ms = 0.0
@@ -396,6 +401,10 @@ class DrcController:
         broker = data.mqtt_broker
         if broker.expire_time and broker.expire_time < self.clock.time_ms() / 1000:
             return ResultCode.INVALID_PARAMETERS, {"reason": "mqtt_broker credentials already expired"}
+        owner = self.cloud_control.holder if self.cloud_control is not None else None
+        refused = self.cloud_control.enter_refusal() if self.cloud_control is not None else None
+        if refused is not None:
+            return refused.code, {"reason": refused.reason}
         # during an automatic task the session is entered all the same (payloads, pushes, the stop on
         # drc/down); its sticks are refused until the task is paused or ends (docs/drc.md)
         denied = self._authority_problem(sticks=False)
@@ -414,6 +423,7 @@ class DrcController:
         self._feed(ds.Enter(self.now(), future, link))
         result, reason = await future
         if result == 0:
+            self._owner = owner
             self.osd_hz, self.hsi_hz = int(data.osd_frequency), int(data.hsi_frequency)
             return ResultCode.SUCCESS, None
         return result, {"reason": reason or "could not enter live flight control"}
@@ -587,6 +597,13 @@ class DrcController:
         if lost:
             self._feed(ds.AuthorityLost(self.now()))
 
+    def cloud_control_changed(self) -> None:
+        """The cloud-control grant ended or changed hands (the loop): a session whose sticks it no longer
+        covers is a failsafe (set-point zeroed); its sticks are refused from now on (399003)."""
+        cc = self.cloud_control
+        if cc is not None and self.active and cc.stick_refusal(self._owner) is not None:
+            self._feed(ds.AuthorityLost(self.now()))
+
     # --------------------------------------------------------------- drc/down (network threads)
     def inline_main(self, topic_name: str, payload: bytes) -> bool:
         """The main bridge's hook: consume drc/down (answered here while a session rides the main link)."""
@@ -648,6 +665,10 @@ class DrcController:
         """A ``drone_control`` or ``stick_control`` (already in the body frame) into the session, with the
         control authority as it stands now."""
         problem = self._authority_problem()
+        cc = self.cloud_control
+        refused = cc.stick_refusal(self._owner) if cc is not None and problem is None else None
+        if refused is not None:
+            problem = refused.code, {"reason": refused.reason}
         self._feed(
             ds.Stick(
                 now,

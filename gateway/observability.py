@@ -95,6 +95,8 @@ HELP: dict[str, str] = {
     "requests_published_total": "Requests to the cloud published (flighttask_resource_get), by method",
     "requests_unanswered_total": "Requests to the cloud given up after every re-send, by method",
     "wayline_tasks_total": "Wayline tasks ended, by status (ok, failed, canceled, timeout)",
+    "cloud_control_decisions_total": "cloud_control_auth_notify sent, by status and why (allow-list, "
+    "holder, operator, timeout, replaced)",
 }
 #: Per-link counters (``djigw_link_<name>_total{device, kind}``), read from the links and decoders.
 _LINK_COUNTERS = {
@@ -255,6 +257,9 @@ class Observability:
             "requests_in_flight": int(getattr(dispatcher, "in_flight", 0)) if dispatcher is not None else 0,
             "devices": devices,
             "drc": self._drc(),
+            "cloud_control": self.app.cloud_control.snapshot()
+            if getattr(self.app, "cloud_control", None)
+            else None,
             "counters": [(n, dict(lab), v) for (n, lab), v in counters],
             "gauges": [(n, dict(lab), v) for (n, lab), v in gauges],
             "histograms": histograms,
@@ -289,6 +294,7 @@ class Observability:
             "services_by_result": results,
             "devices": snap["devices"],
             "drc": snap["drc"],
+            "cloud_control": snap.get("cloud_control"),
             "counters": dict(sorted(totals.items())),
         }
 

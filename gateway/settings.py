@@ -3,6 +3,11 @@
 Sources, strongest first: ``DJIGW_``-prefixed environment variables (nested with ``__``, e.g.
 ``DJIGW_BROKER__PASSWORD``), then the TOML file given with ``--config``. Secrets have no defaults
 and are ``SecretStr`` so they never reach a log line or an error message. No import-time singleton.
+
+Why this module is longer than 500 lines: it is the one settings class and its sections (broker,
+dispatcher, live control, cloud control, metrics, console, devices), each field with its range and the
+description the README's configuration reference is generated from; split, the reference and the
+cross-section checks would have to gather them again.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from schemas.status import MAX_SUB_DEVICES
 __all__ = [
     "BrokerEndpoint",
     "BrokerSettings",
+    "CloudControlSettings",
     "ConfigError",
     "ConsoleSettings",
     "DeviceSettings",
@@ -246,6 +252,31 @@ class DrcSettings(BaseModel):
     )
 
 
+class CloudControlSettings(BaseModel):
+    """Cloud-control authorisation (``cloud_control_auth_request``, RC Plus 2 / RC Pro): who is granted
+    at once, how long the operator has to answer the others, and whether live control needs it."""
+
+    model_config = _STRICT
+    allow: tuple[str, ...] = Field(
+        (), max_length=256, description="user_id values granted at once (nobody else holding control)"
+    )
+    timeout: float = Field(
+        60.0, gt=0, le=3600, description="the operator's time to accept (console, CLI); then denied"
+    )
+    required: bool = Field(
+        False,
+        description="drc_mode_enter needs a granted cloud_control_auth_request even before any cloud "
+        "has sent one (once one has, it always does)",
+    )
+
+    @field_validator("allow")
+    @classmethod
+    def _user_ids(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        if any(not 1 <= len(user) <= 128 for user in value):
+            raise ValueError("each user_id is 1..128 characters")
+        return value
+
+
 class MetricsSettings(BaseModel):
     """The HTTP endpoint for Prometheus (``/metrics``), health checks (``/healthz``) and ``dji-gateway
     status`` (``/status``)."""
@@ -352,6 +383,7 @@ class GatewaySettings(BaseSettings):
     broker: BrokerSettings = BrokerSettings()
     dispatcher: DispatcherSettings = DispatcherSettings()
     drc: DrcSettings = DrcSettings()
+    cloud_control: CloudControlSettings = CloudControlSettings()
     metrics: MetricsSettings = MetricsSettings()
     console: ConsoleSettings = ConsoleSettings()
     devices: list[DeviceSettings] = Field(default_factory=list, max_length=MAX_SUB_DEVICES)
