@@ -4,6 +4,7 @@ per tool (``python -m gateway.cli`` runs it too).
 This package is the operator's side of the gateway: ``run``/``simulate`` (:mod:`gateway.cli.run`),
 the MQTT console ``send``/``monitor`` (:mod:`gateway.cli.console`), ``methods``/``check``
 (:mod:`gateway.cli.contract`), ``fly`` (:mod:`gateway.cli.fly`), ``status`` (:mod:`gateway.cli.status`),
+``control-auth`` (:mod:`gateway.cli.control_auth`),
 ``check-config`` (:mod:`gateway.cli.config`), ``decode``/``encode`` (:mod:`gateway.cli.codec`) and
 ``make run``'s launcher (:mod:`gateway.cli.devrun`). The service (``gateway/`` outside this package)
 never imports it (``tests/test_import_graph.py``).
@@ -21,7 +22,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from gateway.cli import codec, config, console, contract, fly, run, status
+from gateway.cli import codec, config, console, contract, control_auth, fly, run, status
 from gateway.wayline import console_files as wayline_console
 
 
@@ -36,6 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     contract.add_parsers(sub)
     fly.add_parsers(sub)
     status.add_parsers(sub)
+    control_auth.add_parsers(sub)
     config.add_parsers(sub)
     codec.add_parsers(sub)
     wayline_console.add_parsers(sub)

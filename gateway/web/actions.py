@@ -7,7 +7,8 @@ move a device (they need an explicit confirmation, in the page and again here), 
 as a services request through :meth:`gateway.dispatcher.Dispatcher.call_local`, so it is validated,
 routed, authority-checked, time-limited and counted exactly like one from the cloud. The emergency stop
 is the DRC session's emergency stop (every device's ``emergency_stop``, a session holds) followed by every
-adapter's ``stop_motion`` (missions cancelled, loops ended), as at shutdown.
+adapter's ``stop_motion`` (missions cancelled, loops ended), as at shutdown. The operator's answer to a
+cloud-control request (accept, deny, revoke) goes to :meth:`gateway.cloud_control.CloudControl.decide`.
 
 Everything here but :func:`catalogue` runs on the gateway's event loop. Must not know HTTP, sessions or
 the page.
@@ -25,7 +26,15 @@ from schemas import TopicKind
 from schemas.export import ContractJsonSchema
 from schemas.registry import Registry
 
-__all__ = ["GATEWAY_METHODS", "catalogue", "emergency_stop", "moves", "run_action"]
+__all__ = [
+    "DECISIONS",
+    "GATEWAY_METHODS",
+    "catalogue",
+    "cloud_control_decision",
+    "emergency_stop",
+    "moves",
+    "run_action",
+]
 
 #: the gateway's own services (live flight control), offered under the gateway's serial number
 GATEWAY_METHODS = ("drc_mode_enter", "drc_mode_exit")
@@ -142,3 +151,17 @@ async def emergency_stop(app: Any) -> dict[str, Any]:
     outcomes = await asyncio.gather(*(a.stop_motion() for a in adapters), return_exceptions=True)
     failed = {a.info.sn: f"{type(o).__name__}: {o}" for a, o in zip(adapters, outcomes, strict=True) if o}
     return {"stopped": [a.info.sn for a in adapters if a.info.sn not in failed], "failed": failed}
+
+
+#: the operator's answers to cloud-control authorisation (gateway/cloud_control.py)
+DECISIONS = ("accept", "deny", "revoke")
+
+
+def cloud_control_decision(app: Any, decision: str, user_id: str | None, who: str) -> dict[str, Any]:
+    """Accept or deny the waiting ``cloud_control_auth_request`` (``user_id``: the one the operator saw),
+    or revoke the grant: ``{"ok", "reason"?, "cloud_control"}``. On the gateway's loop."""
+    cloud_control = getattr(app, "cloud_control", None)
+    if cloud_control is None:
+        return {"ok": False, "reason": "the gateway is not running yet", "cloud_control": None}
+    outcome: dict[str, Any] = cloud_control.decide(decision, user_id, who=who)
+    return outcome

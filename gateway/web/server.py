@@ -215,6 +215,8 @@ class WebServer:
             r.add_get("/api/wayline/{flight_id}", self._wayline_route)
             r.add_post("/api/action", self._action)
             r.add_post("/api/estop", self._estop)
+            r.add_get("/api/cloud-control", self._cloud_control_get)
+            r.add_post("/api/cloud-control", self._cloud_control_post)
             r.add_get("/api/frames/{sn}", self._frames_download)
             r.add_get("/api/ws", self._ws)
         r.add_route("*", "/{tail:.*}", self._not_found)
@@ -533,6 +535,51 @@ class WebServer:
         )
         self.state.journal.note("emergency_stop", "emergency_stop", who=str(who), **outcome)
         return web.json_response(outcome)
+
+    async def _cloud_control_get(self, request: web.Request) -> web.Response:
+        """Who holds cloud control and which request waits for the operator (``dji-gateway control-auth``)."""
+        denied = self._viewer(request)
+        if denied is not None:
+            return self._refuse(denied)
+        cc = getattr(self.app, "cloud_control", None)
+        snapshot = await self._on_gateway(lambda: cc.snapshot() if cc is not None else None)
+        return web.json_response({"cloud_control": snapshot})
+
+    async def _cloud_control_post(self, request: web.Request) -> web.Response:
+        """The operator's answer: ``{"decision": "accept"|"deny"|"revoke", "user_id"?: str}`` (an action:
+        the console token, as for services). 200 when it applied, 409 when there was nothing to answer."""
+        who = self._who(request)
+        try:
+            body = await request.json()
+        except ValueError:
+            body = None
+        decision = body.get("decision") if isinstance(body, dict) else None
+        denied = self._guard().may_act(request.headers, request.cookies, request.remote or "?")
+        if denied is None and (not isinstance(body, dict) or decision not in actions.DECISIONS):
+            denied = Denied(400, "expected {decision: accept|deny|revoke, user_id}")
+        if denied is None and (
+            set(body) - {"decision", "user_id"} or not isinstance(body.get("user_id", ""), str)
+        ):
+            denied = Denied(
+                400, "expected {decision: accept|deny|revoke, user_id}: a string user_id, nothing else"
+            )
+        if denied is not None:
+            audit(
+                "console_cloud_control",
+                who=str(who),
+                result="refused",
+                status=denied.status,
+                reason=denied.reason,
+            )
+            return self._refuse(denied)
+        assert isinstance(body, dict)
+        user_id = body.get("user_id")
+        outcome = await self._on_gateway(
+            lambda: actions.cloud_control_decision(self.app, str(decision), user_id, str(who))
+        )
+        self.state.journal.note("cloud_control", str(decision), who=str(who), user_id=user_id, **{
+            k: v for k, v in outcome.items() if k != "cloud_control"})  # fmt: skip
+        return web.json_response(outcome, status=200 if outcome["ok"] else 409, dumps=_dumps)
 
     # -- the push ---------------------------------------------------------------------------------------
     async def _ws(self, request: web.Request) -> web.StreamResponse:

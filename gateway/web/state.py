@@ -115,6 +115,7 @@ class ConsoleState:
             },
             "devices": devices,
             "drc": self._drc(drc),
+            "cloud_control": app.cloud_control.snapshot() if getattr(app, "cloud_control", None) else None,
             "mission": self.journal.mission,
             "wayline": self._wayline(),
             "t": self._wall.time_ms(),

@@ -8,6 +8,7 @@ import * as drc from "./drc.js";
 import * as frames from "./frames.js";
 import * as journal from "./journal.js";
 import * as actions from "./actions.js";
+import * as cloudControl from "./cloudcontrol.js";
 
 const ctx = { session: null, catalog: null, ws: null, state: null, retry: 500, drawing: false };
 
@@ -56,6 +57,7 @@ function draw() {
   map.render(msg);
   instruments.render(msg);
   drc.render(msg.drc);
+  cloudControl.render(msg.cloud_control);
   frames.links(msg.devices);
 }
 
@@ -145,4 +147,5 @@ $("#estop").addEventListener("click", async () => {
 });
 
 actions.init({ refreshSession });
+cloudControl.init();
 start();
