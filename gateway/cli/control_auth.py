@@ -32,7 +32,13 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
         "accept, deny, or revoke the grant. Talks to the running gateway's web endpoint (as status does); "
         "answers need the console token. Exit 0 applied, 1 nothing to answer or refused, 2 no gateway.",
     )
-    p.add_argument("decision", nargs="?", default="status", choices=("status", "accept", "deny", "revoke"))
+    p.add_argument(
+        "decision",
+        nargs="?",
+        default="status",
+        choices=("status", "accept", "deny", "revoke"),
+        help="status (default): show; accept / deny: answer the waiting request; revoke: end the grant",
+    )
     p.add_argument("--user", help="the user_id you mean to answer (refused if another request replaced it)")
     p.add_argument("--url", help="default http://127.0.0.1:$DJIGW_METRICS__PORT (9108)")
     p.add_argument("--token", help="the console token (default: $DJIGW_CONSOLE__TOKEN)")
