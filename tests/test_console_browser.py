@@ -593,3 +593,45 @@ def test_the_emergency_stop_stays_in_view_wherever_the_page_is_scrolled(
             )
     finally:
         page.close()
+
+
+def test_the_operator_accepts_a_cloud_control_request_in_the_page(
+    chromium: Any, gateway: dict[str, Any]
+) -> None:
+    """Issue #33 (C): a cloud's cloud_control_auth_request for a user not on the allow-list shows in the
+    Cloud control panel; Accept sends the cloud cloud_control_auth_notify ok; Revoke ends the grant. Last in
+    the module: from here on cloud control is in force in this gateway."""
+    page = chromium.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    cloud = CloudClient(gateway["broker"].host, gateway["broker"].port, GW)
+    try:
+        page.goto(gateway["url"] + "/")
+        page.fill("#token", TOKEN)
+        page.click("#signin button")
+        page.wait_for_selector("#signedin:not([hidden])", timeout=5000)
+        assert page.locator("#cloud-control").is_hidden()  # nobody has asked yet: nothing to show
+        bid = "5d0c3c9e-3f51-4a8e-9a8f-7c1f0e2d4b6a"
+        cloud.publish(
+            f"thing/product/{GW}/services",
+            {"bid": bid, "tid": "8e2f6a1b-0c3d-4e5f-9a7b-1c2d3e4f5a6b", "timestamp": int(time.time() * 1000),
+             "method": "cloud_control_auth_request",
+             "data": {"control_keys": ["flight"], "user_callsign": "WUDIZHR", "user_id": "123456"}},
+        )  # fmt: skip
+        page.wait_for_selector(
+            '#cloud-control[data-pending="123456"] #cc-request:not([hidden])', timeout=5000
+        )
+        assert page.locator("#cc-callsign").inner_text() == "WUDIZHR"
+        assert not cloud.find("events", lambda b: b.get("method") == "cloud_control_auth_notify")
+        page.click("#cc-accept")
+        note = cloud.wait_for("events", lambda b: b.get("method") == "cloud_control_auth_notify", timeout=5)[
+            -1
+        ]
+        assert note["bid"] == bid and note["data"]["output"]["status"] == "ok"
+        page.wait_for_selector('#cloud-control[data-holder="123456"][data-pending=""]', timeout=5000)
+        page.click("#cc-revoke")
+        page.wait_for_selector('#cloud-control[data-holder=""]', timeout=5000)
+        assert not errors, errors
+    finally:
+        cloud.close()
+        page.close()
