@@ -18,7 +18,7 @@ from typing import Annotated
 
 from pydantic import Field, StringConstraints, model_validator
 
-from .base import Float, InboundModel, Int, IntEnumField, Latitude, Longitude, OutboundModel, Text
+from .base import Float, InboundModel, Int, IntEnumField, Latitude, Longitude, OutboundModel, Reason, Text
 from .envelope import EmptyRequest
 from .results import ResultValue
 from .services import ExitWaylineWhenRcLost, RthMode  # the same enums as takeoff_to_point's
@@ -236,6 +236,13 @@ class ProgressExt(OutboundModel):
     media_count: Int = Field(ge=0, description="Media files this task produced.")
     track_id: Text = ""
     break_point: ProgressBreakPoint | None = None
+    x_reason: Reason | None = Field(
+        default=None, description="Extension. Why the task failed, for a human (`result` has the code)."
+    )
+    x_skipped_actions: list[Reason] | None = Field(
+        default=None,
+        description="Extension. The route's WPML actions the aircraft cannot carry out (skipped).",
+    )
 
 
 class ProgressSteps(OutboundModel):

@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from adapters.clock import Clock
     from adapters.osdk import commands as cmds
     from adapters.osdk.config import OsdkDeviceSettings
+    from adapters.osdk.limits import MissionLimits
 
 __all__ = [
     "DISPLAY_MODE_CODES",
@@ -240,6 +241,10 @@ class MissionHost(Protocol):
 
     @property
     def display_mode(self) -> int | None: ...
+
+    @property
+    def limits(self) -> MissionLimits:
+        """The FC's mission rules (adapters/osdk/limits.py)."""
 
     def begin_mission(self, task: Task) -> None:
         """``task`` is the mission the FC flies from now on (its pushes are routed to it)."""

@@ -75,6 +75,7 @@ class OsdkWayline:
             break_point=break_point,
             vel_cmd_range=self.adapter.settings.mission_vel_cmd_range,
             mission_max=self.mission_max,
+            limits=self.adapter.limits,
         )
         return plan_route(route, options)
 
