@@ -149,6 +149,7 @@ class GatewayApp:
             metrics=self.metrics,
             require_authority=s.dispatcher.require_authority,
             store=store,
+            strict_actions=s.wayline.strict_actions,
         )
         # the will and the clean goodbye are the same: a topology with no sub-devices (all offline)
         offline = (topic(TopicKind.STATUS, gw), nb.topology(offline=True))

@@ -213,6 +213,23 @@ class ReturnHomeCancel(EmptyRequest):
     """Cancel the return to home: the aircraft hovers (§3.5). No parameters."""
 
 
+class PrepareOutput(OutboundModel):
+    """``output`` of the flighttask_prepare reply: a failure's ``reason``, or (accepted) the route's actions
+    the aircraft cannot carry out and will skip (extension; ``wayline.strict_actions`` refuses them)."""
+
+    reason: Reason | None = Field(default=None, description="Why the request failed, for a human.")
+    x_skipped_actions: list[Reason] | None = Field(
+        default=None, description="Extension. The route's WPML actions the aircraft will skip, each named."
+    )
+
+
+class FlighttaskPrepareReply(OutboundModel):
+    """``data`` of the flighttask_prepare reply (the services reply's ``result`` and ``output``)."""
+
+    result: ResultValue
+    output: PrepareOutput | None = None
+
+
 # ------------------------------------------------------------------------------------------------- events
 
 
@@ -309,6 +326,7 @@ __all__ = [
     "FlighttaskExecute",
     "FlighttaskPause",
     "FlighttaskPrepare",
+    "FlighttaskPrepareReply",
     "FlighttaskProgress",
     "FlighttaskReady",
     "FlighttaskRecovery",
@@ -316,6 +334,7 @@ __all__ = [
     "FlighttaskResourceGetReply",
     "FlighttaskStatus",
     "FlighttaskUndo",
+    "PrepareOutput",
     "ReturnHome",
     "ReturnHomeCancel",
     "ReturnHomeInfo",

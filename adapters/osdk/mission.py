@@ -273,6 +273,9 @@ class MissionHost(Protocol):
 
     async def flight_task(self, task: str) -> None: ...
 
+    async def secure(self, what: str, task_id: str, reason: str) -> str | None:
+        """A task failed after take-off: land or go home (adapters/osdk/limits.py after_failure)."""
+
 
 def distance_m(a: tuple[float, float], b: tuple[float, float]) -> float:
     """Metres between two (latitude, longitude) points in degrees, flat earth."""
