@@ -14,9 +14,11 @@ import pytest
 
 from adapters.clock import ManualClock
 from adapters.errors import DeviceError, DeviceRejected
+from adapters.osdk import wayline_plan
 from adapters.osdk.config import OsdkDeviceSettings
 from adapters.osdk.limits import MissionLimits, after_failure, check_mission, flat_distance
 from adapters.osdk.sim import OsdkFcModel
+from schemas.results import ResultCode
 from schemas.services import FlyToPoint, TakeoffToPoint
 from tests.test_osdk_truth_model import STEP, Line, MemoryAircraft, Sink
 
@@ -64,6 +66,11 @@ def test_each_rule_in_its_order() -> None:
     assert ack(zigzag[:18], limits=m100) == 0xE2 and ack(zigzag[:18]) is None  # 32.3 km: 30 km on others
     far = [at(22_000 + 950 * (-1) ** i) for i in range(31)]  # 57 km out at 22 km: 101 km from home and back
     assert ack(far, limits=wide, aircraft=far[0][:2]) == 0xE3
+
+
+def test_the_route_limit_codes_are_the_contracts() -> None:
+    assert wayline_plan.ALTITUDE_LIMIT == ResultCode.WAYLINE_ALTITUDE_LIMIT == 321513
+    assert wayline_plan.DISTANCE_LIMIT == ResultCode.WAYLINE_DISTANCE_LIMIT == 321514
 
 
 @pytest.mark.parametrize(

@@ -342,6 +342,8 @@ def plan_route(route: Route, o: PlanOptions) -> Plan:
 
 
 #: Cloud API results (WAYLINE-NOTES §3.7, [ERR]) and break reasons (§4.1) of a route beyond the FC's limits
+#: (schemas.results.ResultCode.WAYLINE_ALTITUDE_LIMIT / _DISTANCE_LIMIT: this sans-I/O module imports no
+#: contract; tests/test_osdk_preflight.py holds them equal)
 ALTITUDE_LIMIT, DISTANCE_LIMIT = 321513, 321514
 BREAK_ALTITUDE, BREAK_DISTANCE = 513, 514
 
