@@ -247,3 +247,28 @@ def test_a_take_off_to_point_broken_off_on_the_way_returns_home(
     assert world.adapter.mode_code() == 9  # return home
     world.run(120.0, until=lambda: not world.model.in_air)
     assert not world.model.in_air and math.hypot(world.model.n, world.model.e) < 2.0  # landed at home
+
+
+def test_the_progress_ext_carries_the_failure_reason_and_the_skipped_actions() -> None:
+    """flighttask_progress: ``ext.x_reason`` on a failure, ``ext.x_skipped_actions`` once planned; both
+    validate against the contract."""
+    from gateway.wayline.task import TaskBook
+    from schemas.wayline import FlighttaskProgress
+
+    book = TaskBook()
+    request = type("Req", (), {"flight_id": "f1"})()
+    task, _ = book.prepare(request, 0.0)
+    book.execute("f1", 0.0)
+    book.planned(
+        task, 3, ["wayline 0 waypoint 1: zoom (a camera setting the flight controller cannot reach)"]
+    )
+    ext = book.progress(task)["output"]["ext"]
+    assert (
+        ext["x_skipped_actions"]
+        == ["wayline 0 waypoint 1: zoom (a camera setting the flight controller cannot reach)"]
+        and "x_reason" not in ext
+    )
+    book.failed(task, 336217, "the flight controller reported a mission error: low battery (0xD9)", None)
+    body = book.progress(task)
+    assert body["output"]["ext"]["x_reason"].endswith("low battery (0xD9)") and body["result"] == 336217
+    FlighttaskProgress.model_validate(body)
