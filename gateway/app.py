@@ -151,6 +151,7 @@ class GatewayApp:
             metrics=self.metrics,
             require_authority=s.dispatcher.require_authority,
             store=store,
+            strict_actions=s.wayline.strict_actions,
         )
         cloud_control = self.cloud_control = CloudControl(
             settings=s.cloud_control,

@@ -277,6 +277,15 @@ class CloudControlSettings(BaseModel):
         return value
 
 
+class WaylineSettings(BaseModel):
+    """Wayline tasks (flighttask_*)."""
+
+    model_config = _STRICT
+    #: refuse (flighttask_prepare 314003) a route with WPML actions the aircraft cannot carry out; off: they
+    #: are skipped and listed (the prepare reply's and the progress' x_skipped_actions)
+    strict_actions: bool = Field(False, description="refuse routes with actions the aircraft would skip")
+
+
 class MetricsSettings(BaseModel):
     """The HTTP endpoint for Prometheus (``/metrics``), health checks (``/healthz``) and ``dji-gateway
     status`` (``/status``)."""
@@ -384,6 +393,7 @@ class GatewaySettings(BaseSettings):
     dispatcher: DispatcherSettings = DispatcherSettings()
     drc: DrcSettings = DrcSettings()
     cloud_control: CloudControlSettings = CloudControlSettings()
+    wayline: WaylineSettings = WaylineSettings()
     metrics: MetricsSettings = MetricsSettings()
     console: ConsoleSettings = ConsoleSettings()
     devices: list[DeviceSettings] = Field(default_factory=list, max_length=MAX_SUB_DEVICES)

@@ -12,7 +12,7 @@ from typing import Annotated
 
 from pydantic import Field
 
-from .base import Float, Int, IntEnumField, Latitude, Longitude, OutboundModel, Text, enum_description
+from .base import Float, Int, IntEnumField, Latitude, Longitude, OutboundModel, Reason, Text, enum_description
 from .results import ResultValue
 from .state import DrcState, DrcStateField
 
@@ -88,6 +88,10 @@ class FlyToPointProgress(OutboundModel):
     planned_path_points: list[PathPoint] | None = Field(
         default=None, description="The points being flown to, as requested (DJI: no size limit)."
     )
+    x_reason: Reason | None = Field(
+        default=None,
+        description="Extension. Why the task failed, for a human (failure events; `result` is the code).",
+    )
 
 
 class TakeoffToPointProgress(OutboundModel):
@@ -98,6 +102,10 @@ class TakeoffToPointProgress(OutboundModel):
     flight_id: Text = Field(min_length=1, description="The flight_id of the takeoff_to_point request.")
     track_id: Text = Field(description="Wayline track id (may be empty).")
     way_point_index: Int = Field(ge=0, description="Index of the point being flown.")
+    x_reason: Reason | None = Field(
+        default=None,
+        description="Extension. Why the task failed, for a human (failure events; `result` is the code).",
+    )
 
 
 class DrcStatusNotify(OutboundModel):

@@ -88,6 +88,7 @@ from .wayline import (
     FlighttaskExecute,
     FlighttaskPause,
     FlighttaskPrepare,
+    FlighttaskPrepareReply,
     FlighttaskProgress,
     FlighttaskReady,
     FlighttaskRecovery,
@@ -227,7 +228,7 @@ def _wayline(kind: TopicKind, method: str, data: type, reply: type | None, summa
 
 #: The wayline (route) methods of a dock-like gateway: DJI's dock pages, not seed 003 (schemas/wayline.py).
 WAYLINE_METHODS: tuple[MethodSpec, ...] = (
-    _wayline(_S, "flighttask_prepare", FlighttaskPrepare, ResultReply, "Issue a wayline task"),
+    _wayline(_S, "flighttask_prepare", FlighttaskPrepare, FlighttaskPrepareReply, "Issue a wayline task"),
     _wayline(_S, "flighttask_execute", FlighttaskExecute, ResultReply, "Execute a prepared wayline task"),
     _wayline(_S, "flighttask_undo", FlighttaskUndo, ResultReply, "Cancel wayline tasks not yet started"),
     _wayline(_S, "flighttask_pause", FlighttaskPause, ResultReply, "Pause the running wayline"),

@@ -52,6 +52,8 @@ class ResultCode(enum.IntEnum):
     WAYLINE_RESUME_FAILED = 319042, "Wayline task: resume failed."
     WAYLINE_COMPLETED = 319044, "Wayline task: completed, cannot be resumed."
     WAYLINE_NOT_RUNNING = 319046, "Wayline task: completed or paused, cannot be paused."
+    WAYLINE_ALTITUDE_LIMIT = 321513, "Wayline task: the route is above the aircraft's altitude limit."
+    WAYLINE_DISTANCE_LIMIT = 321514, "Wayline task: the route is beyond the aircraft's distance limits."
     INVALID_PARAMETERS = 325001, "Bad command parameters."
     DEVICE_TIMEOUT = 325004, "The device did not answer in time."
     DEVICE_NOT_CONNECTED = 325012, "The device is not connected."

@@ -18,7 +18,7 @@ from typing import Annotated
 
 from pydantic import Field, StringConstraints, model_validator
 
-from .base import Float, InboundModel, Int, IntEnumField, Latitude, Longitude, OutboundModel, Text
+from .base import Float, InboundModel, Int, IntEnumField, Latitude, Longitude, OutboundModel, Reason, Text
 from .envelope import EmptyRequest
 from .results import ResultValue
 from .services import ExitWaylineWhenRcLost, RthMode  # the same enums as takeoff_to_point's
@@ -213,6 +213,23 @@ class ReturnHomeCancel(EmptyRequest):
     """Cancel the return to home: the aircraft hovers (§3.5). No parameters."""
 
 
+class PrepareOutput(OutboundModel):
+    """``output`` of the flighttask_prepare reply: a failure's ``reason``, or (accepted) the route's actions
+    the aircraft cannot carry out and will skip (extension; ``wayline.strict_actions`` refuses them)."""
+
+    reason: Reason | None = Field(default=None, description="Why the request failed, for a human.")
+    x_skipped_actions: list[Reason] | None = Field(
+        default=None, description="Extension. The route's WPML actions the aircraft will skip, each named."
+    )
+
+
+class FlighttaskPrepareReply(OutboundModel):
+    """``data`` of the flighttask_prepare reply (the services reply's ``result`` and ``output``)."""
+
+    result: ResultValue
+    output: PrepareOutput | None = None
+
+
 # ------------------------------------------------------------------------------------------------- events
 
 
@@ -236,6 +253,13 @@ class ProgressExt(OutboundModel):
     media_count: Int = Field(ge=0, description="Media files this task produced.")
     track_id: Text = ""
     break_point: ProgressBreakPoint | None = None
+    x_reason: Reason | None = Field(
+        default=None, description="Extension. Why the task failed, for a human (`result` has the code)."
+    )
+    x_skipped_actions: list[Reason] | None = Field(
+        default=None,
+        description="Extension. The route's WPML actions the aircraft cannot carry out (skipped).",
+    )
 
 
 class ProgressSteps(OutboundModel):
@@ -302,6 +326,7 @@ __all__ = [
     "FlighttaskExecute",
     "FlighttaskPause",
     "FlighttaskPrepare",
+    "FlighttaskPrepareReply",
     "FlighttaskProgress",
     "FlighttaskReady",
     "FlighttaskRecovery",
@@ -309,6 +334,7 @@ __all__ = [
     "FlighttaskResourceGetReply",
     "FlighttaskStatus",
     "FlighttaskUndo",
+    "PrepareOutput",
     "ReturnHome",
     "ReturnHomeCancel",
     "ReturnHomeInfo",

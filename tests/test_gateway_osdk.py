@@ -90,6 +90,30 @@ def _take_off(
     return data["target_latitude"], data["target_longitude"]
 
 
+def test_a_take_off_target_111_km_away_is_refused_and_the_aircraft_stays_on_the_ground(
+    rig: dict[str, Any],
+) -> None:
+    """Issue #33 B: a typo (23.5436 for 22.5436) is refused in the reply, naming the field and the distance
+    (the FC would refuse the mission with 0xC7 after taking off); nothing is sent, nothing moves."""
+    fc, cloud = rig["fc"], rig["cloud"]
+    assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
+    cloud.wait_for(f"{SN}/osd", lambda b: "latitude" in b["data"])
+    typo = {**_takeoff_data(flight_id="typo"), "target_latitude": HOME[0] + 1.0}
+    reply = cloud.service("takeoff_to_point", typo)["data"]
+    assert reply["result"] == 336000 + 0xC7, reply
+    reason = reply["output"]["reason"]
+    assert reason.startswith("target_latitude/target_longitude: 111.3 km from the aircraft"), reason
+    assert "2.0 km limit" in reason
+    time.sleep(1.0)  # where the take-off would have been
+    assert fc.inspect(lambda m: (m.in_air, m.motors_on, m.u, m.actions["flight_task"])) == (
+        False,
+        False,
+        0.0,
+        0,
+    )
+    assert _events(cloud, "takeoff_to_point_progress") == []
+
+
 def test_takeoff_fields_the_flight_controller_cannot_honour_are_refused(rig: dict[str, Any]) -> None:
     """Nothing accepted is ignored (issue #16 item 4): an RC-loss action other than the FC's configured
     failsafe, a go-home altitude outside the FC's 20..500 m, a target over its height limit are refused

@@ -615,6 +615,9 @@ FAR = 2500.0
         ([(10, 0, 10), (20, 0, -250), (30, 0, 10)], {}, 0xC1),  # below -200 m
         ([(10, 0, 10)], {}, 0xE0),  # one waypoint: a mission needs two
         ([(10, 0, 10), (20, 0, 10)], {"idle_vel": 20.0}, 0xE0),  # idle above the max speed
+        # OSDK dji_error.cpp: waypoint 1 to n over 60 km (new A3/N3 firmware) is 0xE2; 34 legs of 1.9 km
+        # zig-zagging inside the 2 km radius make 64.6 km
+        ([(950 * (-1) ** i, 0, 10) for i in range(35)], {}, 0xE2),
     ],
 )
 def test_the_last_upload_ack_validates_the_whole_mission(
@@ -628,6 +631,42 @@ def test_the_last_upload_ack_validates_the_whole_mission(
     upload = [e for e in host.events() if e["incident_type"] == 0]
     assert len(upload) == 1 and upload[0]["is_mission_valid"] == 0
     assert host.request("wp_start_stop", {"start": 0})["ack"] == 0xEB  # the rejected waypoint is missing
+
+
+def test_route_length_limits_count_the_way_from_and_back_home_and_depend_on_the_firmware() -> None:
+    """OSDK dji_error.cpp: 0xE3 when home to waypoint 1, the route and waypoint n back home exceed 100 km
+    (new A3/N3 firmware; 60 km others); 0xE2 when the route alone exceeds 60 km (30 km others)."""
+    far = FakeHost(OsdkFcModel(app_id=APP_ID, max_distance_m=30_000.0))
+    far.takeoff()
+    zigzag = [(22_000.0, 950.0 * (-1) ** i, 10.0) for i in range(31)]  # 30 legs of 1.9 km: 57 km
+    assert [a["ack"] for a in _mission(far, far.model, zigzag)][-1] == 0xE3  # 57 + 2 x 22 km > 100 km
+    near = [(1000.0, 950.0 * (-1) ** i, 10.0) for i in range(31)]  # 57 km + 2 x 1.4 km
+    assert [a["ack"] for a in _mission(far, far.model, near)][-1] == 0
+    m100 = FakeHost(OsdkFcModel(app_id=APP_ID, firmware="m100"))
+    m100.activate_and_obtain()
+    short = [(950.0 * (-1) ** i, 0.0, 10.0) for i in range(18)]  # 17 legs of 1.9 km: 32.3 km
+    assert [a["ack"] for a in _mission(m100, m100.model, short)][-1] == 0xE2
+    new = FakeHost()
+    new.activate_and_obtain()
+    assert [a["ack"] for a in _mission(new, new.model, short)][-1] == 0
+
+
+def test_break_mission_reports_the_error_and_the_break_then_hovers() -> None:
+    """The fault-injection hook: the status push carries the error, then the default status says broken."""
+    host = FakeHost()
+    host.takeoff()
+    _mission(host, host.model, [(0, 0, 10), (300, 0, 10)])
+    assert host.request("wp_start_stop", {"start": 0})["ack"] == 0
+    host.run(3.0)
+    assert host.model.break_mission(0xD9, host.now)
+    host.run(0.5)
+    decoded = host.statuses()
+    assert any(d.get("error_notification") == 0xD9 for d in decoded)
+    broken = [d for d in decoded if d["mission_type"] == 0]
+    assert broken and broken[-1]["last_mission_type"] == 1 and broken[-1]["is_broken"] == 1
+    host.run(3.0)
+    assert host.model.run is None and host.model.task == "hover" and host.model.speed < 0.05
+    assert not host.model.break_mission(0xD9, host.now)  # nothing left to break
 
 
 def test_upload_index_and_action_checks() -> None:

@@ -8,6 +8,7 @@ import hashlib
 import hmac
 import itertools
 import json
+import logging
 import math
 import threading
 import time
@@ -586,3 +587,65 @@ def test_sticks_during_a_wayline_are_refused_and_do_nothing(rig: dict[str, Any])
     assert "waypoint mission" in answers[0]["data"]["output"]["reason"] or "wayline" in str(answers[0])
     wait_until(lambda: _status(cloud, flight)[-1] == "ok", 90, what="the route flown to its end")
     assert cloud.service("drc_mode_exit", {})["data"]["result"] == 0
+
+
+# -- issue #33 B: nothing takes off for a route that cannot be flown; a failure after take-off secures it --
+def test_a_route_11000_km_away_is_refused_at_prepare_and_nothing_takes_off(rig: dict[str, Any]) -> None:
+    cloud, fc = rig["cloud"], rig["fc"]
+    far = [PointSpec(HOME[0] + 1.0 * i, HOME[1] - 100.0, HEIGHT) for i in range(3)]  # ~10,000 km west
+    kmz = kmz_bytes(waylines_wpml(far, speed=10.0, transitional_speed=10.0, take_off_security_height=8.0))
+    flight = str(uuid.uuid4())
+    reply = _prepare(rig, flight, kmz)
+    assert reply["data"]["result"] == 321514  # the Cloud API's "start/end point too far" (WAYLINE-NOTES §3.7)
+    reason = reply["data"]["output"]["reason"]
+    assert "wayline 0 waypoint 0:" in reason and "km from the aircraft (its home)" in reason, reason
+    assert "break reason 514" in reason
+    execute = cloud.service("flighttask_execute", {"flight_id": flight})["data"]
+    assert execute["result"] == 321514
+    time.sleep(1.0)  # what would have been the take-off: nothing happens
+    assert fc.inspect(lambda m: (m.in_air, m.motors_on, m.actions["flight_task"], m.upload)) == (
+        False, False, 0, None
+    )  # fmt: skip
+
+
+def test_a_wayline_broken_off_after_take_off_returns_home_and_says_why(
+    rig: dict[str, Any], caplog: pytest.LogCaptureFixture
+) -> None:
+    cloud, fc = rig["cloud"], rig["fc"]
+    with caplog.at_level(logging.ERROR):
+        flight = _prepare_and_execute(rig)
+        wait_until(
+            lambda: fc.inspect(lambda m: m.run is not None and math.hypot(m.n, m.e) > 25.0),
+            40,
+            what="out there",
+        )
+        assert fc.break_mission(0xD9)  # low battery: the FC breaks the mission off and hovers
+        wait_until(lambda: _status(cloud, flight)[-1:] == ["failed"], 10, what="failed")
+        wait_until(lambda: fc.inspect(lambda m: m.task) == "go_home", 5, what="the FC's go home")
+    last = _progress(cloud, flight)[-1]["data"]
+    assert last["result"] == 336000 + 0xD9
+    ext = last["output"]["ext"]
+    assert "low battery" in ext["x_reason"] and "returning home" in ext["x_reason"], ext
+    assert ext["break_point"]["break_reason"] == 1564
+    assert any("failed after take-off" in r.getMessage() and "returning home" in r.getMessage()
+               for r in caplog.records if r.levelno == logging.ERROR)  # fmt: skip
+    cloud.wait_for(f"{SN}/osd", lambda b: b["data"].get("mode_code") == 9, timeout=5)  # return home
+
+
+def test_actions_the_aircraft_cannot_do_are_listed_or_refused_under_strict(rig: dict[str, Any]) -> None:
+    coords = [_ne(n, e) for n, e in POINTS]
+    pts = [PointSpec(*coords[0], HEIGHT), PointSpec(*coords[1], HEIGHT, actions=[
+        ActionSpec("zoom", {"focalLength": 48, "payloadPositionIndex": 0}),
+        ActionSpec("takePhoto", {"fileSuffix": "wp1", "payloadPositionIndex": 0})]),
+        PointSpec(*coords[2], HEIGHT)]  # fmt: skip
+    kmz = kmz_bytes(waylines_wpml(pts, speed=10.0, transitional_speed=10.0, take_off_security_height=8.0))
+    reply = _prepare(rig, str(uuid.uuid4()), kmz)["data"]
+    assert reply["result"] == 0
+    assert reply["output"]["x_skipped_actions"] == [
+        "wayline 0 waypoint 1: zoom (a camera setting the flight controller cannot reach)"
+    ]
+    rig["gw"].app.wayline.strict_actions = True  # [wayline] strict_actions = true
+    strict = _prepare(rig, str(uuid.uuid4()), kmz)["data"]
+    assert strict["result"] == 314003
+    assert "strict_actions" in strict["output"]["reason"] and "zoom" in strict["output"]["reason"]
+    assert not rig["fc"].inspect(lambda m: m.in_air)

@@ -69,6 +69,7 @@ from adapters.osdk.extensions import (
     IdleVelocity,
     Pause,
 )
+from adapters.osdk.limits import LimitBreach, MissionLimits, after_failure, check_mission, flat_distance
 from adapters.osdk.mission import (
     AUTOMATIC,
     DM_AUTO_LANDING,
@@ -91,7 +92,7 @@ from adapters.wire.layout import LayoutError
 from adapters.wire.stream import BadFrame
 from adapters.wire.table import bind_handlers
 from schemas.envelope import EmptyRequest
-from schemas.results import ResultCode, ground_station_ack
+from schemas.results import GROUND_STATION_ACK_BASE, ResultCode, ground_station_ack, meaning
 from schemas.services import FlightAuthorityGrab, FlyToPoint, FlyToPointStop, TakeoffToPoint
 
 log = logging.getLogger(__name__)
@@ -1031,8 +1032,17 @@ class AircraftAdapter(SupervisedAdapter):
         return sum(_leg(a, b) for a, b in zip([here, *ahead], ahead, strict=False))
 
     def _progress(
-        self, task: Task, status: str, index: int, result: int = 0, *, need_reply: bool = True
+        self,
+        task: Task,
+        status: str,
+        index: int,
+        result: int = 0,
+        *,
+        need_reply: bool = True,
+        reason: str | None = None,
     ) -> None:
+        """One ``fly_to_point_progress`` / ``takeoff_to_point_progress``; a failure carries ``reason`` in the
+        extension field ``x_reason`` (the Cloud API's events have only the ``result`` code)."""
         if self._sink is None or task.kind not in ("fly_to", "takeoff"):
             return  # waylines, the way home and adopted missions report through gateway/wayline
         index = max(0, index)
@@ -1042,10 +1052,14 @@ class AircraftAdapter(SupervisedAdapter):
                     "remaining_distance": round(left, 1),
                     "remaining_time": round(left / task.speed, 1) if task.speed > 0 else 0.0,
                     "planned_path_points": task.planned}  # fmt: skip
+            if reason:
+                data["x_reason"] = reason[:300]
             self._sink.event(self.info.sn, "fly_to_point_progress", data, need_reply=need_reply)
         else:
             data = {"flight_id": task.task_id, "track_id": "", "status": status, "result": result,
                     "way_point_index": index}  # fmt: skip
+            if reason:
+                data["x_reason"] = reason[:300]
             self._sink.event(self.info.sn, "takeoff_to_point_progress", data, need_reply=True)
 
     def _start_watch(self, task: Task) -> None:
@@ -1065,12 +1079,18 @@ class AircraftAdapter(SupervisedAdapter):
         await task.done.wait()
         last = task.points - 1 - task.offset
         if task.failed is not None:
-            self._progress(task, "wayline_failed", task.reached - task.offset, task.failed)
+            ack = task.failed - GROUND_STATION_ACK_BASE
+            text = cmds.GS_ACK_TEXT.get(ack, "") if 0 < ack < 256 else meaning(task.failed)
+            reason = f"the flight controller reported a mission error: {text or meaning(task.failed)}"
+            if 0 < ack < 256:
+                reason += f" (0x{ack:02X})"
+            await self._failed(task, task.failed, reason)
         elif task.dropped is not None:
             # the FC ended it: an emergency stop the operator asked for is a cancel; anything else failed
-            status = "wayline_cancel" if task.dropped == "emergency stop" else "wayline_failed"
-            result = 0 if status == "wayline_cancel" else ResultCode.BUSY
-            self._progress(task, status, task.reached - task.offset, result)
+            if task.dropped == "emergency stop":
+                self._progress(task, "wayline_cancel", task.reached - task.offset, 0)
+            else:
+                await self._failed(task, ResultCode.BUSY, f"the flight controller ended it: {task.dropped}")
         elif task.finished:
             self._progress(task, "wayline_ok", last)
             if task.kind == "takeoff":
@@ -1097,6 +1117,8 @@ class AircraftAdapter(SupervisedAdapter):
         points = [here, *((p.latitude, p.longitude, self._relative(p.height)) for p in data.points)]
         for index, (_, _, height) in enumerate(points[1:]):
             self._check_height(f"points[{index}].height", height)
+        names = ["the aircraft", *(f"points[{i}]" for i in range(len(data.points)))]
+        self._preflight(points, names)
         await self._upload(points, data.max_speed)
         task = Task("fly_to", data.fly_to_id, len(points), offset=1, path=points)
         task.speed = max(1.0, min(float(data.max_speed), self.settings.mission_vel_cmd_range))
@@ -1113,6 +1135,41 @@ class AircraftAdapter(SupervisedAdapter):
         self._require_online()
         await self.stop_current_mission()
         return CallResult()
+
+    @property
+    def limits(self) -> MissionLimits:
+        """What this flight controller accepts in a waypoint mission (adapters/osdk/limits.py)."""
+        s = self.settings
+        return MissionLimits.for_firmware(self.fw, max_distance=s.max_distance, max_height=s.max_height)
+
+    def _home(self) -> tuple[float, float]:
+        """Where the aircraft took off (its position when last on the ground), else where it is."""
+        t = self.telemetry
+        if self.home_position is not None and self.in_air:
+            return self.home_position
+        return (t.latitude or 0.0, t.longitude or 0.0)
+
+    def mission_breach(
+        self, points: list[tuple[float, float, float]], names: list[str]
+    ) -> LimitBreach | None:
+        """The FC's mission rule ``points`` break (from where the aircraft is now), or None."""
+        t = self.telemetry
+        here = (t.latitude or 0.0, t.longitude or 0.0)
+        return check_mission(points, aircraft=here, home=self._home(), limits=self.limits, names=names)
+
+    def _preflight(self, points: list[tuple[float, float, float]], names: list[str]) -> None:
+        """Refuse, before anything is sent, a mission the FC would refuse (it would answer the ACK named,
+        after a take-off for a take-off to point): 336000 + that ACK, the field and the numbers in the
+        reason."""
+        breach = self.mission_breach(points, names)
+        if breach is not None:
+            log.warning("aircraft %s: refused before take-off or upload: %s", self.info.sn, breach.text)
+            text = cmds.GS_ACK_TEXT.get(breach.ack, "")
+            raise DeviceRejected(
+                ground_station_ack(breach.ack),
+                f"{breach.text} (the flight controller would refuse the mission: 0x{breach.ack:02X} {text})",
+                {"ack": breach.ack},
+            )
 
     def _check_height(self, name: str, height: float) -> None:
         """A height above take-off the FC can fly to (``max_height``, its configured limit)."""
@@ -1221,6 +1278,9 @@ class AircraftAdapter(SupervisedAdapter):
             raise DeviceRejected(ResultCode.BUSY, "the aircraft is already in the air")
         self._check_takeoff(data)
         self.require_no_mission()
+        route = self._takeoff_route(data)
+        names = ["security_takeoff_height", *["commander_flight_height"] * (len(route) - 2)]
+        self._preflight(route, [*names, "target_latitude/target_longitude"])  # nothing moves for a refusal
         if self.fw == "new":
             await self._set_go_home_altitude(int(data.rth_altitude))
         await self.flight_task("takeoff")
@@ -1238,7 +1298,7 @@ class AircraftAdapter(SupervisedAdapter):
         t = self.telemetry
         while not (self.in_air and (t.height or 0.0) >= 1.0 and t.display_mode != AUTO_TAKEOFF):
             if self._now() > deadline:
-                self._progress(task, "wayline_failed", 0, ResultCode.DEVICE_TIMEOUT)
+                await self._failed(task, ResultCode.DEVICE_TIMEOUT, "the take-off did not end in time")
                 return
             await self._clock.sleep(0.1)
         try:
@@ -1250,12 +1310,67 @@ class AircraftAdapter(SupervisedAdapter):
             await self.start_mission(task)
             self._remember(task)
         except DeviceRejected as exc:
-            self._progress(task, "wayline_failed", 0, exc.result)
+            task.failed = int(exc.result)
+            task.done.set()
+            await self._failed(task, exc.result, f"the mission after the take-off was refused: {exc}")
             return
-        except (DeviceTimeout, DeviceNotConnected):
-            self._progress(task, "wayline_failed", 0, ResultCode.DEVICE_TIMEOUT)
+        except (DeviceTimeout, DeviceNotConnected) as exc:
+            task.failed = int(ResultCode.DEVICE_TIMEOUT)
+            task.done.set()
+            await self._failed(
+                task, ResultCode.DEVICE_TIMEOUT, f"the mission after the take-off failed: {exc}"
+            )
             return
         await self._watch(task)
+
+    async def _failed(self, task: Task, result: int, reason: str) -> None:
+        """``task`` failed: a take-off to point is never left where it failed (:meth:`secure`), the reason
+        is logged at ERROR and told in the failure event (``x_reason``) and ``x_osdk_safety_notify``."""
+        index = task.reached - task.offset
+        if task.kind == "takeoff":
+            done = await self.secure(KIND_WORDS[task.kind], task.task_id, reason)
+            if done is not None:
+                reason = f"{reason}; {done}"
+        else:
+            log.error(
+                "aircraft %s: %s %s failed: %s", self.info.sn, KIND_WORDS[task.kind], task.task_id, reason
+            )
+        self._progress(task, "wayline_failed", index, int(result), reason=reason)
+
+    async def secure(self, what: str, task_id: str, reason: str) -> str | None:
+        """A task failed after the aircraft took off for it: never leave it hovering where it failed.
+        DJI's return-home rule (adapters/osdk/limits.py :func:`after_failure`): within 20 m of home it lands,
+        farther it flies the FC's go home (climb to the go-home altitude, home, land). Nothing when it is on
+        the ground or not the gateway's to command (the RC took it back). Logged at ERROR with the reason,
+        told by ``x_osdk_safety_notify``; returns what was done, in words (None: nothing)."""
+        t = self.telemetry
+        here = (t.latitude, t.longitude) if t.latitude is not None and t.longitude is not None else None
+        home = self.home_position
+        distance = flat_distance(here, home) if here is not None and home is not None else None
+        action = after_failure(in_air=self.in_air, has_control=self.has_control, home_distance=distance)
+        where = f"{t.height or 0.0:.1f} m above take-off, " + (
+            f"{distance:.0f} m from home" if distance is not None else "home unknown"
+        )
+        if action is None:
+            left = "on the ground" if not self.in_air else "the RC controls it"
+            log.error("aircraft %s: %s %s failed: %s (%s)", self.info.sn, what, task_id, reason, left)
+            return None
+        words = "landing where it is" if action == "landing" else "returning home (the FC's go home)"
+        sn = self.info.sn
+        log.error(
+            "aircraft %s: %s %s failed after take-off: %s; %s (%s)", sn, what, task_id, reason, words, where
+        )
+        try:
+            if action == "landing":
+                await self.flight_task("landing")
+            else:
+                await self.wayline.go_home(task_id)
+        except (DeviceRejected, DeviceTimeout, DeviceNotConnected) as exc:
+            log.error("aircraft %s: could not start %s after the failure: %s", self.info.sn, words, exc)
+            self._notify("mission_ended", f"{reason}; {words} refused: {exc}", task_id)
+            return None
+        self._notify("landing" if action == "landing" else "returning_home", f"{reason} ({where})", task_id)
+        return words
 
     def _online_only(self, call: Handler) -> Handler:
         async def checked(data: Any) -> CallResult:

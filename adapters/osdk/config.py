@@ -83,6 +83,16 @@ class OsdkDeviceSettings(BaseModel):
         le=500,
         description="the flight controller's height limit above take-off (m): higher targets are refused",
     )
+    max_distance: float = Field(
+        2000.0,
+        ge=15,
+        le=100_000,
+        description=(
+            "the farthest (m) a mission point may be from home, and the first from the aircraft: the flight"
+            " controller's radius limit (DJI Assistant 2), whose missions beyond it it refuses (0xC7, 0xC9);"
+            " take-off, fly-to and wayline targets farther away are refused before anything moves"
+        ),
+    )
 
     @field_validator("product", mode="before")
     @classmethod

@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from adapters.clock import Clock
     from adapters.osdk import commands as cmds
     from adapters.osdk.config import OsdkDeviceSettings
+    from adapters.osdk.limits import MissionLimits
 
 __all__ = [
     "DISPLAY_MODE_CODES",
@@ -241,6 +242,10 @@ class MissionHost(Protocol):
     @property
     def display_mode(self) -> int | None: ...
 
+    @property
+    def limits(self) -> MissionLimits:
+        """The FC's mission rules (adapters/osdk/limits.py)."""
+
     def begin_mission(self, task: Task) -> None:
         """``task`` is the mission the FC flies from now on (its pushes are routed to it)."""
 
@@ -267,6 +272,9 @@ class MissionHost(Protocol):
     async def obtain_control(self, control: int) -> None: ...
 
     async def flight_task(self, task: str) -> None: ...
+
+    async def secure(self, what: str, task_id: str, reason: str) -> str | None:
+        """A task failed after take-off: land or go home (adapters/osdk/limits.py after_failure)."""
 
 
 def distance_m(a: tuple[float, float], b: tuple[float, float]) -> float:

@@ -40,12 +40,16 @@ Choices where the protocol is silent (also next to the code that makes them):
   arrives (seed: "valid all waypoints' data together after the last one"), with the Mobile SDK's
   documented limits: 2..255 waypoints (``min_waypoints``), max speed 2..15 m/s, idle speed in
   (0, max]; altitude in [-200, 500] m (``0xC1``/``0xC0``); within ``max_distance_m`` of home
-  (``0xC7``); neighbours 0.5..2000 m apart in 3-D (``0xE5``/``0xE6``); action commands 0..5
-  (``0xE8``). A waypoint whose ACK is an error is not stored. The ``0x02 0x04`` upload event
-  (incident 0) follows every validation, valid or not.
+  (``0xC7``); neighbours 0.5..2000 m apart in 3-D (``0xE5``/``0xE6``); waypoint 1 to n at most 60 km
+  (``0xE2``) and with home to waypoint 1 and back at most 100 km (``0xE3``; 30 and 60 km on M100
+  firmware: OSDK ``dji_error.cpp``); action commands 0..5 (``0xE8``). The first waypoint must be within
+  ``max_distance_m`` of the aircraft at the start (``0xC9``). A waypoint whose ACK is an error is not
+  stored. The ``0x02 0x04`` upload event (incident 0) follows every validation, valid or not.
 * One reached event (incident 2, ``current_status`` 6 "post-action") per waypoint, after its actions;
   ``reach_pre_action_events=True`` adds the ``current_status`` 4 event on arrival, as OSDK describes.
   Mission status (``0x02 0x03``) at 1 Hz while a mission runs.
+* ``break_mission(error, now)`` (fault injection) breaks off the running waypoint mission as the FC does
+  on an error: a status push with the error, then the default status with ``is_broken``; it hovers.
 * ``rc_takeover()`` always pushes ``0x02 0x01`` (reason 4) on an ACK-required session (resent
   0.5 s x 2 until the host ACKs), revokes SDK control, flips the RC switch to P and hovers.
 * Releasing control does not stop a running mission; landing and go home cancel it.
@@ -819,12 +823,24 @@ class OsdkFcModel:
                 c > 5 for c in p.fields["command_list"][: p.fields["action_num"]]
             ):
                 return 0xE8
+        trace = 0.0
         for a, b in itertools.pairwise(points):
             d = math.dist((a.n, a.e, a.u), (b.n, b.e, b.u))
             if d < ARRIVE_M:
                 return 0xE5
             if d > 2000.0:
                 return 0xE6
+            trace += d
+        # OSDK dji_error.cpp: waypoint 1 to n over 60 km (new A3/N3 firmware; 30 km others) is 0xE2; with
+        # home to waypoint 1 and waypoint n back home over 100 km (60 km others), 0xE3
+        max_trace, max_total = (60_000.0, 100_000.0) if self.firmware == "new" else (30_000.0, 60_000.0)
+        if trace > max_trace:
+            return 0xE2
+        first, last = points[0], points[-1]
+        home = (self.home_n, self.home_e)
+        total = trace + math.dist(home, (first.n, first.e)) + math.dist((last.n, last.e), home)
+        if total > max_total:
+            return 0xE3
         return 0
 
     def _point(self, wp: dict[str, Any]) -> _Point:
@@ -881,6 +897,23 @@ class OsdkFcModel:
         if not self.in_air and kind != "waypoint":
             return 0xDA  # hotpoint and follow-me start from the air (module docstring)
         return 0
+
+    def break_mission(self, error: int, now: float | None = None) -> bool:
+        """Fault injection: the FC breaks off the waypoint mission it flies with ground-station error
+        ``error`` (e.g. 0xD9 low battery): the mission status push carries it, then the default status says
+        the mission was broken off, and the aircraft brakes and hovers where it is (no "finished" event).
+        Returns whether a mission was running."""
+        run = self.run
+        if run is None:
+            return False
+        now = self._clock(now)
+        self._push("status_push", {"mission_type": 1, "target_waypoint": run.target,
+                                   "current_status": 0, "error_notification": error}, now)  # fmt: skip
+        self._abort_missions()
+        self._enter_hover(None)
+        self._push("status_push", {"mission_type": 0, "last_mission_type": 1, "is_broken": 1, "reserved_1": 0,
+                                   "reason": error, "reserved_2": 0, "reserved_3": 0}, now)  # fmt: skip
+        return True
 
     def _on_wp_pause_resume(self, f: dict[str, Any], now: float) -> dict[str, Any]:
         if self.run is None:
@@ -1589,6 +1622,11 @@ class OsdkFcDevice:
         """The RC takes control back; the push goes out with the next tick."""
         with self.lock:
             self.model.rc_takeover()
+
+    def break_mission(self, error: int) -> bool:
+        """The FC breaks off its waypoint mission with ``error`` (:meth:`OsdkFcModel.break_mission`)."""
+        with self.lock:
+            return self.model.break_mission(error)
 
 
 def _latlon(text: str) -> tuple[float, float]:

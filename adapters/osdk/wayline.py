@@ -23,11 +23,12 @@ import math
 from collections.abc import Callable
 
 from adapters.errors import DeviceNotConnected, DeviceRejected, DeviceTimeout, MissionStopped
+from adapters.osdk.commands import GS_ACK_TEXT
 from adapters.osdk.mission import MissionHost, Task, distance_m
 from adapters.osdk.wayline_plan import MISSION_MAX, FcMission, Plan, PlanOptions, plan_route
 from adapters.wayline.kmz import Route
 from adapters.wayline.runner import Reached
-from schemas.results import ResultCode
+from schemas.results import GROUND_STATION_ACK_BASE, ResultCode
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +76,7 @@ class OsdkWayline:
             break_point=break_point,
             vel_cmd_range=self.adapter.settings.mission_vel_cmd_range,
             mission_max=self.mission_max,
+            limits=self.adapter.limits,
         )
         return plan_route(route, options)
 
@@ -157,7 +159,9 @@ class OsdkWayline:
                 raise DeviceNotConnected(f"aircraft {self.adapter.info.sn} lost during the mission")
             await self.adapter.clock.sleep(POLL)
         if task.failed is not None:
-            raise DeviceRejected(task.failed, "the flight controller reported a mission error")
+            ack = task.failed - GROUND_STATION_ACK_BASE
+            text = f": {GS_ACK_TEXT[ack]} (0x{ack:02X})" if ack in GS_ACK_TEXT else ""
+            raise DeviceRejected(task.failed, f"the flight controller reported a mission error{text}")
         if task.canceled:
             raise MissionStopped("the mission was stopped")
         if task.dropped is not None:
@@ -266,6 +270,12 @@ class OsdkWayline:
         self._task = task
         a.begin_mission(task)
         await a.start_mission(task)
+
+    async def secure(self, flight_id: str, reason: str) -> str | None:
+        """The wayline failed after the aircraft took off for it (or while it flew it): never leave it where
+        it failed (the adapter's rule: land within 20 m of home, else the FC's go home). Returns what was
+        done, in words (None: nothing: on the ground, or the RC has it)."""
+        return await self.adapter.secure("wayline", flight_id, reason)
 
     @property
     def mission_running(self) -> bool:

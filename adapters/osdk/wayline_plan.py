@@ -62,6 +62,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from adapters.errors import RouteRefused
+from adapters.osdk.limits import MissionLimits, check_mission
 from adapters.wayline.kmz import Action, ActionGroup, Placemark, Route
 
 log = logging.getLogger(__name__)
@@ -93,6 +94,8 @@ class PlanOptions:
     break_point: tuple[int, int, int] | None = None  # wayline_id, index, state (0 segment, 1 waypoint)
     vel_cmd_range: float = MAX_SPEED
     mission_max: int = MISSION_MAX
+    #: the FC's mission rules (adapters/osdk/limits.py): a route that breaks one is refused (None: unchecked)
+    limits: MissionLimits | None = None
 
 
 @dataclass
@@ -333,8 +336,60 @@ def plan_route(route: Route, o: PlanOptions) -> Plan:
                 points.append(extra)
     if len(points) < 2:
         points.insert(0, _Point(lat, lon, max(height, climb), transit, None))
+    _check_limits(points, o)
     missions = _split(points, o, yaw_mode or 0, trace_mode, finish, exit_rc, transit)
     return Plan(missions, route_points, skipped, conflict)
+
+
+#: Cloud API results (WAYLINE-NOTES §3.7, [ERR]) and break reasons (§4.1) of a route beyond the FC's limits
+#: (schemas.results.ResultCode.WAYLINE_ALTITUDE_LIMIT / _DISTANCE_LIMIT: this sans-I/O module imports no
+#: contract; tests/test_osdk_preflight.py holds them equal)
+ALTITUDE_LIMIT, DISTANCE_LIMIT = 321513, 321514
+BREAK_ALTITUDE, BREAK_DISTANCE = 513, 514
+
+
+def _check_limits(points: list[_Point], o: PlanOptions) -> None:
+    """Refuse a route any of whose missions the FC would refuse (adapters/osdk/limits.py): each chained
+    mission is checked as the FC checks an upload, from where the aircraft will be when it starts."""
+    if o.limits is None:
+        return
+    names = []
+    for k, p in enumerate(points):
+        if p.ref is not None:
+            names.append(f"wayline {p.ref[0]} waypoint {p.ref[1]}")
+        else:
+            names.append("the entry point above the aircraft" if k == 0 else "the way home")
+    here = (o.here[0], o.here[1])
+    for start, chunk in _chunks(points, o):
+        at = here if start == 0 else (chunk[0].lat, chunk[0].lon)
+        breach = check_mission(
+            [(p.lat, p.lon, p.alt) for p in chunk],
+            aircraft=at,
+            home=o.home,
+            limits=o.limits,
+            names=names[start : start + len(chunk)],
+        )
+        if breach is not None:
+            height = breach.kind == "height"
+            raise RouteRefused(
+                BREAK_ALTITUDE if height else BREAK_DISTANCE,
+                f"{breach.text} (the flight controller would refuse it: 0x{breach.ack:02X})",
+                ALTITUDE_LIMIT if height else DISTANCE_LIMIT,
+            )
+
+
+def _chunks(points: list[_Point], o: PlanOptions) -> list[tuple[int, list[_Point]]]:
+    """The missions ``points`` are split into: (index of the first point, the points); mission k+1 starts
+    at mission k's last waypoint."""
+    size = max(2, min(o.mission_max, MISSION_MAX))
+    chunks: list[tuple[int, list[_Point]]] = []
+    start = 0
+    while True:
+        chunks.append((start, points[start : start + size]))
+        if start + size >= len(points):
+            break
+        start += size - 1  # the next mission starts where this one ends
+    return chunks
 
 
 def _trace_mode(wid: int, pms: tuple[Placemark, ...]) -> int:
@@ -372,15 +427,7 @@ def _split(
     exit_rc: bool,
     transit: float,
 ) -> list[FcMission]:
-    size = max(2, min(o.mission_max, MISSION_MAX))
-    chunks: list[list[_Point]] = []
-    start = 0
-    while True:
-        chunk = points[start : start + size]
-        chunks.append(chunk)
-        if start + size >= len(points):
-            break
-        start += size - 1  # the next mission starts where this one ends
+    chunks = [chunk for _, chunk in _chunks(points, o)]
     missions = []
     for k, chunk in enumerate(chunks):
         if k > 0:  # the repeated start: already flown, its actions already ran

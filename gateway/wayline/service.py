@@ -125,6 +125,7 @@ Result = tuple[int, dict[str, Any] | None]
 class _File:
     fingerprint: str
     route: Route
+    skipped: tuple[str, ...] = ()  # the trial plan's actions the aircraft cannot carry out
 
 
 class WaylineService:
@@ -142,6 +143,7 @@ class WaylineService:
         require_authority: bool,
         fetch: Callable[[str], Awaitable[bytes]] = fetch_kmz,
         store: StateStore | None = None,
+        strict_actions: bool = False,
     ) -> None:
         self.gateway_sn = gateway_sn
         self.devices = devices
@@ -161,6 +163,9 @@ class WaylineService:
         self._last_rth_altitude = DEFAULT_RTH_ALTITUDE
         self.store = store if store is not None else StateStore(None)
         self._persisted: dict[str, tuple[Any, ...]] = {}  # flight_id -> what the store holds of it
+        #: refuse a route with actions the aircraft cannot carry out (else they are skipped and listed)
+        self.strict_actions = strict_actions
+        self._moved: set[str] = set()  # runs that took off or entered their route: a failure secures them
 
     # -- the aircraft ----------------------------------------------------------------------------
     def _aircraft(self) -> Any:
@@ -225,6 +230,8 @@ class WaylineService:
             elif failure is not None:
                 self.book.failed(task, *failure, None)
                 return failure[0], {"reason": failure[1]}
+            if file.done() and failure is None and file.result().skipped:
+                return ResultCode.SUCCESS, {"x_skipped_actions": list(file.result().skipped)}
         return ResultCode.SUCCESS, None
 
     async def _load(self, aircraft: Any, url: str, fingerprint: str, prepare: FlighttaskPrepare) -> _File:
@@ -238,18 +245,28 @@ class WaylineService:
             raise KmzError(_UNOBTAINABLE, str(exc)) from None
         digest = check_fingerprint(kmz, fingerprint)
         route = parse_wpml(unpack_wpml(kmz))
+        skipped: tuple[str, ...] = ()
         if aircraft.telemetry.latitude is not None:
-            self._plan(aircraft, route, prepare)
-        return _File(digest, route)
+            skipped = tuple(self._plan(aircraft, route, prepare).skipped)
+        return _File(digest, route, skipped)
 
     def _plan(self, aircraft: Any, route: Route, prepare: FlighttaskPrepare) -> Any:
+        """The runner's plan from where the aircraft is now (RouteRefused for what it cannot fly, the FC's
+        limits included); under ``strict_actions`` a route with actions it would skip is refused too."""
         bp = prepare.break_point
-        return aircraft.wayline.plan(
+        plan = aircraft.wayline.plan(
             route,
             rth_altitude=prepare.rth_altitude,
             exit_wayline_when_rc_lost=prepare.exit_wayline_when_rc_lost,
             break_point=(bp.wayline_id, bp.index, int(bp.state)) if bp is not None else None,
         )
+        skipped = list(getattr(plan, "skipped", ()))
+        if self.strict_actions and skipped:
+            more = f" and {len(skipped) - 1} more" if len(skipped) > 1 else ""
+            raise RouteRefused(
+                1634, f"wayline.strict_actions: the aircraft cannot carry out {skipped[0]}{more}", FILE_FORMAT
+            )
+        return plan
 
     def _log_ignored(self, data: FlighttaskPrepare) -> None:
         ignored = [
@@ -278,9 +295,14 @@ class WaylineService:
                     "reason": f"immediate task {skew / 1000:.0f} s from its execute_time (30 s allowed)"
                 }
         if task is not None and task.phase is Phase.PREPARED:
-            failure = _file_failure(self._files.get(task.flight_id))
+            prepared = self._files.get(task.flight_id)
+            failure = _file_failure(prepared)
             if failure is not None and failure[0] != _UNOBTAINABLE:
                 self.book.failed(task, *failure, None)
+            elif prepared is not None and prepared.done() and failure is None and self.book.active is None:
+                refused = self._recheck(aircraft, task, prepared.result())
+                if refused is not None:
+                    return refused
         verdict, start = self.book.execute(data.flight_id, self.clock.monotonic())
         if start:
             assert task is not None
@@ -289,6 +311,20 @@ class WaylineService:
                 self._run(aircraft, task), name=f"wayline-{task.flight_id}"
             )
         return verdict.result, ({"reason": verdict.reason} if verdict.reason else None)
+
+    def _recheck(self, aircraft: Any, task: WaylineTask, file: _File) -> Result | None:
+        """The execute plans the prepared route again from where the aircraft is now (it may have moved
+        since the prepare): a route it cannot fly from here is refused before anything moves; the task stays
+        prepared (executable from where it can be flown)."""
+        if aircraft.telemetry.latitude is None:
+            return None
+        try:
+            self._plan(aircraft, file.route, task.request)
+        except RouteRefused as exc:
+            code, reason = _failure(exc)
+            log.warning("wayline task %s: execute refused before take-off: %s", task.flight_id, reason)
+            return code, {"reason": reason[:300]}
+        return None
 
     async def _flighttask_undo(self, aircraft: Any, data: FlighttaskUndo) -> Result:
         verdict = self.book.undo(list(data.flight_ids))
@@ -402,13 +438,14 @@ class WaylineService:
         plan = self._plan(aircraft, file.route, req)
         for note in plan.skipped:
             log.warning("wayline task %s: skipped %s", task.flight_id, note)
-        book.planned(task, plan.route_points)
+        book.planned(task, plan.route_points, list(plan.skipped))
         book.step(task, STEP_UPLOAD, 8)
         self._emit(task)
         await runner.ensure_control()
         if not aircraft.in_air:
             book.step(task, STEP_TAKEOFF, 9)
             self._emit(task)
+            self._moved.add(task.flight_id)  # from here a failure must not leave it in the air
             try:
                 await runner.take_off(TAKEOFF_TIMEOUT)
             except DeviceTimeout as exc:  # a dock's "preparation timed out"
@@ -423,6 +460,7 @@ class WaylineService:
             self._emit(task)
 
         def entered() -> None:
+            self._moved.add(task.flight_id)
             book.entered(task)
             self._emit(task)
 
@@ -438,16 +476,19 @@ class WaylineService:
         except (KmzError, RouteRefused) as exc:
             code, reason = _failure(exc)
             br = getattr(exc, "break_reason", 0)
-            book.failed(task, code, reason, self._break_point(aircraft, task, br) if br else None)
+            book.failed(task, code, await self._secure(aircraft, task, reason),
+                        self._break_point(aircraft, task, br) if br else None)  # fmt: skip
         except DeviceRejected as exc:
-            book.failed(task, int(exc.result), str(exc)[:300], self._break_point(aircraft, task, 1564))
+            reason = await self._secure(aircraft, task, str(exc))
+            book.failed(task, int(exc.result), reason[:300], self._break_point(aircraft, task, 1564))
         except (DeviceTimeout, DeviceNotConnected) as exc:
             code = (
                 ResultCode.DEVICE_NOT_CONNECTED
                 if isinstance(exc, DeviceNotConnected)
                 else ResultCode.DEVICE_TIMEOUT
             )
-            book.failed(task, int(code), str(exc)[:300], self._break_point(aircraft, task, 2))
+            reason = await self._secure(aircraft, task, str(exc))
+            book.failed(task, int(code), reason[:300], self._break_point(aircraft, task, 2))
         except MissionStopped:
             if task.phase is not Phase.DONE:
                 book.stopped(task, "canceled", self._break_point(aircraft, task, 1281))
@@ -459,9 +500,22 @@ class WaylineService:
             book.failed(task, int(ResultCode.INTERNAL_ERROR), "internal error in the gateway", None)
         finally:
             self._runs.pop(task.flight_id, None)
+            self._moved.discard(task.flight_id)
             self.metrics.inc("wayline_tasks_total", status=task.status)
             log.info("wayline task %s ended %s (%s)", task.flight_id, task.status, task.result)
             self._emit(task)
+
+    async def _secure(self, aircraft: Any, task: WaylineTask, reason: str) -> str:
+        """A run that took off (or entered its route) failed: the runner never leaves the aircraft where it
+        failed (the Onboard SDK runner: land within 20 m of home, else the FC's go home; logged at ERROR).
+        Returns the reason the task reports (``ext.x_reason``), with what was done. A run that failed
+        before anything moved is only logged."""
+        secure = getattr(aircraft.wayline, "secure", None)
+        if secure is None or task.flight_id not in self._moved:
+            log.error("wayline task %s failed before anything moved: %s", task.flight_id, reason)
+            return reason
+        done = await secure(task.flight_id, reason)
+        return f"{reason}; {done}" if done else reason
 
     async def _fresh_file(self, aircraft: Any, task: WaylineTask) -> _File:
         """The route to fly: a fresh URL from the cloud (flighttask_resource_get) when it gives one,
@@ -575,6 +629,7 @@ class WaylineService:
             sn,
         )
         self._emit(task)
+        self._moved.add(flight_id)  # it flies: a failure must not leave it in the air
         self._runs[flight_id] = asyncio.get_running_loop().create_task(
             self._follow(aircraft, task, mission), name=f"wayline-follow-{flight_id}"
         )

@@ -112,6 +112,7 @@ class WaylineTask:
     break_point: dict[str, Any] | None = None
     reason: str = ""
     history: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)  # the route's actions the aircraft cannot carry out
 
 
 class TaskBook:
@@ -233,8 +234,9 @@ class TaskBook:
         if percent is not None:
             task.percent = percent
 
-    def planned(self, task: WaylineTask, total_points: int) -> None:
+    def planned(self, task: WaylineTask, total_points: int, skipped: list[str] | None = None) -> None:
         task.total_points = max(1, total_points)
+        task.skipped = list(skipped or [])
 
     def entered(self, task: WaylineTask) -> None:
         """The aircraft is on its way to the first waypoint."""
@@ -301,6 +303,10 @@ class TaskBook:
         }
         if task.break_point is not None:
             ext["break_point"] = task.break_point
+        if task.status == "failed" and task.reason:
+            ext["x_reason"] = task.reason[:300]  # extension: the Cloud API has only the result code
+        if task.skipped:
+            ext["x_skipped_actions"] = [s[:300] for s in task.skipped]
         return {
             "result": task.result,
             "output": {
