@@ -147,7 +147,6 @@ class GatewayApp:
             requests=requests,
             clock=self.clock,
             metrics=self.metrics,
-            require_authority=s.dispatcher.require_authority,
             store=store,
         )
         # the will and the clean goodbye are the same: a topology with no sub-devices (all offline)
