@@ -15,8 +15,8 @@ returns, in order. There are five states::
                  Enter                    LinkUp
         IDLE ──────────────▶ CONNECTING ──────────▶ ACTIVE ◀──────────┐
          ▲  ◀── LinkFailed ──┘                        │  │ heartbeat  │ Heartbeat,
-         │                                 Exit,      │  │ lost,      │ Stick(seq 0)
-         │                            BrokerLost,     │  ▼ EStop      │ after EStop
+         │                                 Exit,      │  │ lost,      │ Stick(seq 0),
+         │                            BrokerLost,     │  ▼ EStop      │ Enter after EStop
          │  LinkClosed                idle timeout,   │ HOLDING ──────┘
          └──────────────── EXITING ◀─────────────────┴──┘ (same)
 
@@ -25,7 +25,8 @@ returns, in order. There are five states::
 * **ACTIVE** (2): sticks drive the devices. A stick older than ``stick_timeout`` zeroes the set-point
   (a *stick* failsafe: the session goes on, the next stick drives again).
 * **HOLDING** (2): a failsafe holds the zero set-point: an emergency stop (released by a stick whose
-  seq restarts at 0) or heartbeats lost for ``heartbeat_timeout`` (released by the next heartbeat).
+  seq restarts at 0, or by a fresh ``Enter`` of the same session) or heartbeats lost for
+  ``heartbeat_timeout`` (released by the next heartbeat).
   Sticks are answered with an error, never with 0.
 * **EXITING** (0): the set-point is zero, the session's link is being closed (:class:`CloseLink`);
   :class:`LinkClosed` returns to IDLE. The DRC state already reads 0: the session is over.
@@ -478,6 +479,11 @@ class DrcSession:
         s = self._session
         if s is not None and self.state in _LIVE:
             if s.link == event.link:  # the same session asked for again (clouds repeat): no churn
+                if Hold.ESTOP in s.holds:
+                    # a fresh drc_mode_enter is the operator taking live control again: it ends the
+                    # emergency stop's hold (the set-point stays zero until the next stick), so a client
+                    # whose seq only increases is not locked out (DJI documents no release; issue #33)
+                    self._release(out, s, Hold.ESTOP, event.at)
                 out.add(Reply(event.request, SUCCESS))
                 return
             # another broker: end this session first; the enter is handled once its link is closed
