@@ -137,6 +137,9 @@ DRC_SEQ_TOO_OLD = 319033
 DRC_HEARTBEAT_TIMEOUT = 514301
 DRC_LINK_LOST = 514303
 
+#: why a stick (or payload command) is refused while an emergency stop holds, and how to release it
+_ESTOP_HOLDS = "emergency stop holds until a stick with seq 0 or a fresh drc_mode_enter"
+
 
 class State(enum.Enum):
     IDLE = "idle"
@@ -624,7 +627,7 @@ class DrcSession:
         if Hold.ESTOP in s.holds:
             if seq != 0:
                 out.add(Count("held"))
-                out.add(StickReply(event.request, BUSY, seq, "emergency stop holds until seq restarts at 0"))
+                out.add(StickReply(event.request, BUSY, seq, _ESTOP_HOLDS))
                 return
             self._release(out, s, Hold.ESTOP, event.at)  # seq 0 after an emergency stop: drive again
         s.last_seq = seq
@@ -677,7 +680,7 @@ class DrcSession:
             out.add(StickReply(event.request, DRC_HEARTBEAT_TIMEOUT, None, reason))
         elif Hold.ESTOP in s.holds:
             out.add(Count("held"))
-            out.add(StickReply(event.request, BUSY, None, "emergency stop holds until seq restarts at 0"))
+            out.add(StickReply(event.request, BUSY, None, _ESTOP_HOLDS))
         else:
             out.add(Forward(event.request))
 

@@ -21,7 +21,8 @@ fly_to_point                 0x03 0x10 init (degrees → radians, WGS84 height �
 fly_to_point_stop            0x03 0x12 cancel → ``wayline_cancel``
 takeoff_to_point             0x01 0x01 take-off; once airborne a 2-point mission (straight up to
                              ``security_takeoff_height``, then the target) with
-                             ``takeoff_to_point_progress`` events
+                             ``takeoff_to_point_progress`` events; the climb is a mission of its
+                             own when its RC-loss action differs from the flight to the point's
 x_osdk_*                     the rest of seed 004 (extensions.py)
 ===========================  ======================================================================
 
