@@ -149,7 +149,6 @@ class GatewayApp:
             requests=requests,
             clock=self.clock,
             metrics=self.metrics,
-            require_authority=s.dispatcher.require_authority,
             store=store,
             strict_actions=s.wayline.strict_actions,
         )

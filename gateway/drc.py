@@ -73,7 +73,7 @@ from gateway.settings import BrokerSettings, GatewaySettings
 from schemas import ResultCode, TopicKind, echo_heart_beat, error_reply_from_validation, reply_for, topic
 from schemas.drc import SILENT_WHEN_ACCEPTED, DroneControl
 from schemas.registry import Registry
-from schemas.services import DrcModeEnter
+from schemas.services import MAX_PUSH_FREQUENCY, DrcModeEnter
 
 log = logging.getLogger(__name__)
 
@@ -424,8 +424,17 @@ class DrcController:
         result, reason = await future
         if result == 0:
             self._owner = owner
-            self.osd_hz, self.hsi_hz = int(data.osd_frequency), int(data.hsi_frequency)
-            return ResultCode.SUCCESS, None
+            # more than DJI's 30 Hz: pushed at 30, and the reply says so (a client asks for the most it can
+            # get; refusing would leave it without live control for a number it cannot act on)
+            osd, hsi = (min(int(hz), MAX_PUSH_FREQUENCY) for hz in (data.osd_frequency, data.hsi_frequency))
+            self.osd_hz, self.hsi_hz = osd, hsi
+            if (osd, hsi) == (data.osd_frequency, data.hsi_frequency):
+                return ResultCode.SUCCESS, None
+            log.info(
+                "drc_mode_enter asked for osd %s Hz, hsi %s Hz: pushing at %s Hz and %s Hz (at most %s Hz)",
+                data.osd_frequency, data.hsi_frequency, osd, hsi, MAX_PUSH_FREQUENCY,
+            )  # fmt: skip
+            return ResultCode.SUCCESS, {"osd_frequency": osd, "hsi_frequency": hsi}
         return result, {"reason": reason or "could not enter live flight control"}
 
     async def exit(self) -> tuple[int, dict[str, Any] | None]:

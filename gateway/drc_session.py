@@ -15,8 +15,8 @@ returns, in order. There are five states::
                  Enter                    LinkUp
         IDLE ──────────────▶ CONNECTING ──────────▶ ACTIVE ◀──────────┐
          ▲  ◀── LinkFailed ──┘                        │  │ heartbeat  │ Heartbeat,
-         │                                 Exit,      │  │ lost,      │ Stick(seq 0)
-         │                            BrokerLost,     │  ▼ EStop      │ after EStop
+         │                                 Exit,      │  │ lost,      │ Stick(seq 0),
+         │                            BrokerLost,     │  ▼ EStop      │ Enter after EStop
          │  LinkClosed                idle timeout,   │ HOLDING ──────┘
          └──────────────── EXITING ◀─────────────────┴──┘ (same)
 
@@ -25,7 +25,8 @@ returns, in order. There are five states::
 * **ACTIVE** (2): sticks drive the devices. A stick older than ``stick_timeout`` zeroes the set-point
   (a *stick* failsafe: the session goes on, the next stick drives again).
 * **HOLDING** (2): a failsafe holds the zero set-point: an emergency stop (released by a stick whose
-  seq restarts at 0) or heartbeats lost for ``heartbeat_timeout`` (released by the next heartbeat).
+  seq restarts at 0, or by a fresh ``Enter`` of the same session) or heartbeats lost for
+  ``heartbeat_timeout`` (released by the next heartbeat).
   Sticks are answered with an error, never with 0.
 * **EXITING** (0): the set-point is zero, the session's link is being closed (:class:`CloseLink`);
   :class:`LinkClosed` returns to IDLE. The DRC state already reads 0: the session is over.
@@ -135,6 +136,9 @@ NO_FLIGHT_AUTHORITY = 319030
 DRC_SEQ_TOO_OLD = 319033
 DRC_HEARTBEAT_TIMEOUT = 514301
 DRC_LINK_LOST = 514303
+
+#: why a stick (or payload command) is refused while an emergency stop holds, and how to release it
+_ESTOP_HOLDS = "emergency stop holds until a stick with seq 0 or a fresh drc_mode_enter"
 
 
 class State(enum.Enum):
@@ -478,6 +482,11 @@ class DrcSession:
         s = self._session
         if s is not None and self.state in _LIVE:
             if s.link == event.link:  # the same session asked for again (clouds repeat): no churn
+                if Hold.ESTOP in s.holds:
+                    # a fresh drc_mode_enter is the operator taking live control again: it ends the
+                    # emergency stop's hold (the set-point stays zero until the next stick), so a client
+                    # whose seq only increases is not locked out (DJI documents no release; issue #33)
+                    self._release(out, s, Hold.ESTOP, event.at)
                 out.add(Reply(event.request, SUCCESS))
                 return
             # another broker: end this session first; the enter is handled once its link is closed
@@ -618,7 +627,7 @@ class DrcSession:
         if Hold.ESTOP in s.holds:
             if seq != 0:
                 out.add(Count("held"))
-                out.add(StickReply(event.request, BUSY, seq, "emergency stop holds until seq restarts at 0"))
+                out.add(StickReply(event.request, BUSY, seq, _ESTOP_HOLDS))
                 return
             self._release(out, s, Hold.ESTOP, event.at)  # seq 0 after an emergency stop: drive again
         s.last_seq = seq
@@ -671,7 +680,7 @@ class DrcSession:
             out.add(StickReply(event.request, DRC_HEARTBEAT_TIMEOUT, None, reason))
         elif Hold.ESTOP in s.holds:
             out.add(Count("held"))
-            out.add(StickReply(event.request, BUSY, None, "emergency stop holds until seq restarts at 0"))
+            out.add(StickReply(event.request, BUSY, None, _ESTOP_HOLDS))
         else:
             out.add(Forward(event.request))
 

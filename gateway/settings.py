@@ -213,7 +213,11 @@ class DispatcherSettings(BaseModel):
     # again (at 30 s the copy arriving 30.008 s later took a second photo: tests/test_dispatcher_limits.py)
     reply_cache_seconds: float = Field(120.0, ge=0)
     require_authority: bool = Field(
-        True, description="camera/gimbal/flight methods need a prior *_authority_grab"
+        True,
+        description=(
+            "camera/gimbal/flight methods need a prior *_authority_grab "
+            "(wayline tasks and return home do not: docs/cloud-api.md)"
+        ),
     )
     event_retries: int = Field(3, ge=0, le=10)
     event_retry_interval: float = Field(3.0, gt=0)

@@ -15,7 +15,10 @@ Policy (the contract's rules, applied through these bases and types):
   (``60.0``) for an integer field is read as that integer, because DJI's Java Cloud SDK declares such
   fields ``Float`` and serialises ``60.0``; ``60.5`` is still refused. JSON Schema's ``integer`` already
   matches ``60.0``, and each such model says which fields in ``x-tolerant-reader``. Booleans are strict
-  (``0``/``1`` are not booleans). Integer enums accept their integer values only (not ``"1"``, ``true`` or
+  (``0``/``1`` are not booleans) but for one shape, again only in what the gateway receives: the JSON strings
+  ``"true"`` and ``"false"`` (exactly so) are read as the boolean, because an RC-side client in use with real
+  controllers (github wudizhr/DJI_Cloud_API_demo) sends ``"enable_tls": "false"``; ``"yes"``, ``"1"`` or
+  ``"False"`` are still refused. Integer enums accept their integer values only (not ``"1"``, ``true`` or
   ``1.0``). A wrong type in a speed or a height must never move a device.
 - Optional fields that are absent serialise as absent, never as ``null``.
 - Secrets (``SecretStr``) serialise masked unless the dump is given ``context={"reveal_secrets": True}``.
@@ -68,19 +71,29 @@ class ContractModel(BaseModel):
         return dumped
 
 
-def _integer_fields(cls: type[BaseModel]) -> tuple[str, ...]:
-    """The fields of ``cls`` whose type is a plain integer (``int`` or ``int | None``; not bool, not an
-    enum: enums take their integer values only), by their JSON names."""
-    cached = _INTEGER_FIELDS.get(cls)
+def _fields_of_type(cls: type[BaseModel], kind: type) -> tuple[str, ...]:
+    """The fields of ``cls`` whose type is plainly ``kind`` (``kind`` or ``kind | None``; for ``int`` not
+    bool, not an enum: enums take their integer values only), by their JSON names."""
+    cached = _FIELDS_OF_TYPE.get((cls, kind))
     if cached is None:
         names: list[str] = []
         for name, info in cls.model_fields.items():
             types = get_args(info.annotation) if get_origin(info.annotation) in (Union, UnionType) else ()
             plain = [_bare(t) for t in (types or (info.annotation,)) if t is not type(None)]
-            if len(plain) == 1 and plain[0] is int:
+            if len(plain) == 1 and plain[0] is kind:
                 names += _json_names(name, info)
-        cached = _INTEGER_FIELDS[cls] = tuple(names)
+        cached = _FIELDS_OF_TYPE[(cls, kind)] = tuple(names)
     return cached
+
+
+def _integer_fields(cls: type[BaseModel]) -> tuple[str, ...]:
+    """The plain integer fields of ``cls`` (:func:`_fields_of_type`)."""
+    return _fields_of_type(cls, int)
+
+
+def _boolean_fields(cls: type[BaseModel]) -> tuple[str, ...]:
+    """The plain boolean fields of ``cls`` (:func:`_fields_of_type`)."""
+    return _fields_of_type(cls, bool)
 
 
 def _bare(annotation: Any) -> Any:
@@ -98,7 +111,7 @@ def _json_names(name: str, info: FieldInfo) -> list[str]:
     return [info.alias or name]
 
 
-_INTEGER_FIELDS: dict[type[BaseModel], tuple[str, ...]] = {}
+_FIELDS_OF_TYPE: dict[tuple[type[BaseModel], type], tuple[str, ...]] = {}
 
 #: What the tolerant reader says in the JSON Schema of a model with integer fields.
 TOLERANT_READER_NOTE = (
@@ -107,24 +120,44 @@ TOLERANT_READER_NOTE = (
 )
 
 
+#: What the tolerant reader says in the JSON Schema of a model with boolean fields.
+BOOLEAN_STRING_NOTE = (
+    'The JSON strings "true" and "false" (exactly so) are accepted for these boolean fields and read as the '
+    'boolean (an RC-side client, github wudizhr/DJI_Cloud_API_demo, sends "enable_tls": "false"); any other '
+    "string is refused."
+)
+_BOOLEAN_STRINGS = {"true": True, "false": False}
+
+
 def read_integral_floats(cls: type[BaseModel], value: Any) -> Any:
-    """The tolerant reader's step for one model: ``60.0`` → ``60`` for its integer fields, before strict
-    validation. Anything else (``60.5``, ``"60"``, ``true``) is left for validation to refuse."""
+    """The tolerant reader's step for one model: ``60.0`` → ``60`` for its integer fields and ``"true"`` /
+    ``"false"`` → the boolean for its boolean fields, before strict validation. Anything else (``60.5``,
+    ``"60"``, ``true`` for an integer; ``"yes"``, ``"1"``, ``1`` for a boolean) is left for validation to
+    refuse."""
     if not isinstance(value, dict):
         return value
-    fields = _integer_fields(cls)
-    changed = {
+    changed: dict[str, Any] = {
         name: int(v)
-        for name in fields
+        for name in _integer_fields(cls)
         if type(v := value.get(name)) is float and math.isfinite(v) and v.is_integer()
     }
+    for name in _boolean_fields(cls):
+        text = value.get(name)
+        if type(text) is str and text in _BOOLEAN_STRINGS:
+            changed[name] = _BOOLEAN_STRINGS[text]
     return {**value, **changed} if changed else value
 
 
 def _document_tolerance(schema: dict[str, Any], cls: type[BaseModel]) -> None:
+    tolerance: dict[str, Any] = {}
     fields = _integer_fields(cls)
     if fields:
-        schema["x-tolerant-reader"] = {"integral_float_fields": list(fields), "note": TOLERANT_READER_NOTE}
+        tolerance.update({"integral_float_fields": list(fields), "note": TOLERANT_READER_NOTE})
+    booleans = _boolean_fields(cls)
+    if booleans:
+        tolerance.update({"boolean_string_fields": list(booleans), "boolean_note": BOOLEAN_STRING_NOTE})
+    if tolerance:
+        schema["x-tolerant-reader"] = tolerance
 
 
 class InboundModel(ContractModel):

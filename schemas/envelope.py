@@ -13,7 +13,8 @@ Decisions:
   required: without them no reply can be matched.
 - A missing or ``null`` inbound ``data`` is read as ``{}``: the seed documents "Data: null" for
   flight_authority_grab/drc_mode_exit/fly_to_point_stop/drone_emergency_stop and sends ``{}`` in the
-  example; both mean "no parameters". A method that has parameters then fails on them by name.
+  example; both mean "no parameters", and so do ``""`` (DJI's reference cloud) and the JSON string
+  ``"null"`` (an RC-side client). A method that has parameters then fails on them by name.
 - Outbound thing envelopes always carry ``tid``, ``bid`` and ``timestamp`` (ms). ``gateway`` is required on
   osd/state (cloud stacks route sub-device telemetry by it) and optional elsewhere (the seed's replies,
   events and update_topo examples omit it; the gateway fills it when it knows it).
@@ -71,8 +72,8 @@ class InboundResult(InboundModel):
 
 
 class EmptyRequest(InboundModel):
-    """No parameters ("Data: null" in the seed; ``{}``, ``null``, ``""`` (DJI's reference cloud) and a
-    missing ``data`` are all accepted)."""
+    """No parameters ("Data: null" in the seed; ``{}``, ``null``, ``""`` (DJI's reference cloud), the string
+    ``"null"`` (an RC-side client) and a missing ``data`` are all accepted)."""
 
 
 class PropertyResult(OutboundModel):
@@ -94,19 +95,29 @@ class Envelope(ContractModel):
     reply_data: ClassVar[type[ContractModel] | None] = None
 
 
+#: ``data`` values that mean "no parameters" besides ``{}``, a JSON null and a missing key: ``""`` (DJI's
+#: reference cloud, for every method without parameters) and the JSON *string* ``"null"`` (an RC-side
+#: client, github wudizhr/DJI_Cloud_API_demo, sends ``return_home`` so).
+_EMPTY_DATA = ("", "null")
+
+
 def _data_or_empty(value: Any) -> Any:
-    # null, a missing data and "" (DJI's reference cloud sends "data": "" for every method without
-    # parameters) all mean "no parameters"; a method that needs some then names the missing field
-    if isinstance(value, dict) and (value.get("data") is None or value.get("data") == ""):
-        return {**value, "data": {}}
+    # null, a missing data, "" and "null" all mean "no parameters"; a method that needs some then names
+    # the missing field
+    if isinstance(value, dict):
+        data = value.get("data")
+        if data is None or (type(data) is str and data in _EMPTY_DATA):
+            return {**value, "data": {}}
     return value
 
 
 #: The tolerant reader's note on ``data`` in every request envelope's JSON Schema.
 EMPTY_DATA_NOTE: dict[str, JsonValue] = {
     "empty_data": (
-        'data may be {}, null, "" or absent: each means no parameters (DJI\'s Java Cloud SDK sends "data": '
-        '"" for every method without any); a method that needs parameters then names the missing field.'
+        'data may be {}, null, "", the string "null" or absent: each means no parameters (DJI\'s Java Cloud '
+        'SDK sends "data": "" for every method without any; an RC-side client, github '
+        'wudizhr/DJI_Cloud_API_demo, sends "data": "null"); a method that needs parameters then names the '
+        "missing field."
     )
 }
 

@@ -1222,6 +1222,8 @@ class CloudShape:
 
 
 _JAVA_SDK = "DJI-Cloud-API-Demo cloud-sdk (Java Cloud SDK)"
+#: An RC-side client used with real remote controllers (commit d53db04f37cefa0e36b79c7a88238f802e30416e).
+_RC_CLIENT = "github wudizhr/DJI_Cloud_API_demo CluodAPI_Terminal_Client"
 _JAVA_ENV = (
     '"tid": "0a3c4f9e-5b0d-4a41-9c8e-2d7f1b6e3a10", "bid": "7b1e9d2c-3f4a-4e5b-8c6d-9e0f1a2b3c4d", '
     '"timestamp": 1700000000000'
@@ -1329,5 +1331,36 @@ CLOUD_SHAPES: tuple[CloudShape, ...] = (
         '"timestamp": 1704038400000}',
         {"control_keys": ["flight"]},
         "DJI Cloud API docs, RC Plus 2 / RC Pro DRC page: the release example as published",
+    ),
+    CloudShape(
+        TopicKind.SERVICES,
+        "return_home",
+        '{"bid": "f9f07aad-d1f1-4dc1-8ad0-a3417fd365cc", "data": "null", "method": "return_home", '
+        '"tid": "b103b00a-3fcc-476e-9cb6-bc5e27d2defd", "timestamp": 1734425015702}',
+        {},
+        f'{_RC_CLIENT} services_publisher.py: return_home with the JSON string "null" as data',
+    ),
+    CloudShape(
+        TopicKind.SERVICES,
+        "drc_mode_enter",
+        '{"bid": "5e4d3c2b-1a09-4f8e-9d7c-6b5a49382716", "data": {"hsi_frequency": 1, "mqtt_broker": '
+        '{"address": "mqtt.example.com:1883", "client_id": "sn_a", "enable_tls": "false", '
+        '"expire_time": 1999999999, "password": "jwt_token", "username": "sn_a_username"}, '
+        '"osd_frequency": 50}, "tid": "6f5e4d3c-2b1a-4098-8e7d-6c5b4a392817", "timestamp": 1654070968655, '
+        '"method": "drc_mode_enter"}',
+        {
+            "mqtt_broker": {
+                "address": "mqtt.example.com:1883",
+                "client_id": "sn_a",
+                "username": "sn_a_username",
+                "password": "jwt_token",
+                "expire_time": 1999999999,
+                "enable_tls": False,
+            },
+            "osd_frequency": 50,
+            "hsi_frequency": 1,
+        },
+        f'{_RC_CLIENT} services_publisher.py: enable_tls as the string "false", osd_frequency 50 (pushed '
+        "at 30 Hz, said in the reply's output); its literal expire_time of 2023 is refused as expired",
     ),
 )

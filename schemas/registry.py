@@ -73,6 +73,7 @@ from .services import (
     CameraRecordingStop,
     CameraScreenDrag,
     DrcModeEnter,
+    DrcModeEnterReply,
     DrcModeExit,
     FlightAuthorityGrab,
     FlyToPoint,
@@ -178,7 +179,7 @@ SEED_METHODS: tuple[MethodSpec, ...] = (
     _seed(
         _S, "payload_authority_grab", PayloadAuthorityGrab, ResultReply, "Payload control authority grabbing"
     ),
-    _seed(_S, "drc_mode_enter", DrcModeEnter, ResultReply, "Enter the live flight controls mode"),
+    _seed(_S, "drc_mode_enter", DrcModeEnter, DrcModeEnterReply, "Enter the live flight controls mode"),
     _seed(_S, "drc_mode_exit", DrcModeExit, ResultReply, "Exit the live flight controls mode"),
     _seed(_S, "takeoff_to_point", TakeoffToPoint, ResultReply, "One-key taking off"),
     _seed(_S, "fly_to_point", FlyToPoint, ResultReply, "flyto target point"),

@@ -16,6 +16,7 @@ from typing import Annotated
 from pydantic import Field, StringConstraints, field_validator, model_validator
 
 from .base import (
+    MAX_SAFE_INT,
     Bool,
     Float,
     InboundModel,
@@ -23,11 +24,14 @@ from .base import (
     IntEnumField,
     Latitude,
     Longitude,
+    OutboundModel,
     PayloadIndex,
+    Reason,
     Secret,
     enum_description,
 )
 from .envelope import EmptyRequest
+from .results import ResultValue
 
 # ------------------------------------------------------------------------------------------------- enums
 
@@ -205,15 +209,52 @@ class MqttBroker(InboundModel):
         return value
 
 
-Frequency = Annotated[int, Field(strict=True, ge=1, le=30, json_schema_extra={"x-unit": "Hz"})]
+#: The highest osd_info_push / hsi_info_push rate (Hz) DJI documents (seed 003, Dock 2/3 pages: 1..30).
+MAX_PUSH_FREQUENCY = 30
+
+Frequency = Annotated[
+    int,
+    Field(
+        strict=True,
+        ge=1,
+        le=MAX_SAFE_INT,
+        json_schema_extra={"x-unit": "Hz", "x-used-at-most": MAX_PUSH_FREQUENCY},
+    ),
+]
 
 
 class DrcModeEnter(InboundModel):
-    """Enter live flight control (DRC) (seed 003 § Enter the live flight controls mode)."""
+    """Enter live flight control (DRC) (seed 003 § Enter the live flight controls mode).
+
+    DJI's range for both rates is 1..30 Hz. A higher rate is what a client asks for, not a malformed
+    request (an RC-side client, github wudizhr/DJI_Cloud_API_demo, sends ``osd_frequency`` 50): it is
+    accepted, the gateway pushes at 30 Hz and says so in the reply's ``output`` (:class:`DrcModeEnterReply`).
+    0 and negative rates are refused.
+    """
 
     mqtt_broker: MqttBroker
-    osd_frequency: Frequency = Field(description="osd_info_push rate, 1..30 Hz.")
-    hsi_frequency: Frequency = Field(description="hsi_info_push rate, 1..30 Hz.")
+    osd_frequency: Frequency = Field(
+        description=f"osd_info_push rate, 1..{MAX_PUSH_FREQUENCY} Hz; more is pushed at {MAX_PUSH_FREQUENCY}."
+    )
+    hsi_frequency: Frequency = Field(
+        description=f"hsi_info_push rate, 1..{MAX_PUSH_FREQUENCY} Hz; more is pushed at {MAX_PUSH_FREQUENCY}."
+    )
+
+
+class DrcModeEnterOutput(OutboundModel):
+    """``output`` of the ``drc_mode_enter`` reply: ``reason`` on failure; on success the push rates actually
+    used when the request asked for more than the device can do (absent when used as asked)."""
+
+    reason: Reason | None = None
+    osd_frequency: Annotated[int, Field(strict=True, ge=1, le=MAX_PUSH_FREQUENCY)] | None = None
+    hsi_frequency: Annotated[int, Field(strict=True, ge=1, le=MAX_PUSH_FREQUENCY)] | None = None
+
+
+class DrcModeEnterReply(OutboundModel):
+    """``data`` of the ``drc_mode_enter`` reply: ``result``, and ``output`` (rates used, or why not)."""
+
+    result: ResultValue
+    output: DrcModeEnterOutput | None = None
 
 
 class DrcModeExit(EmptyRequest):

@@ -229,6 +229,27 @@ def test_drc_driven_only_by_stick_control_moves_the_aircraft_and_the_gimbal(sim:
     assert 1 <= len(refused) <= COPIES and all(r == refused[0] for r in refused)  # each copy: one refusal
     wait_until(lambda: math.hypot(osd()["speed_x"], osd()["speed_y"]) < 0.5, 10, what="braked")
 
+    # issue #33: a fresh drc_mode_enter, as an RC-side client sends it (github wudizhr/DJI_Cloud_API_demo:
+    # "enable_tls": "false", osd_frequency 50), is the same session: answered 0 with the rates used, and it
+    # ends the stop's hold, so sticks whose seq only increases drive again (no seq 0 needed)
+    rc_link = {**link, "enable_tls": "false"}
+    again = {"tid": "enter-2", "bid": "b-enter-2", "timestamp": int(time.time() * 1000),
+             "method": "drc_mode_enter", "data": {"mqtt_broker": rc_link, "osd_frequency": 50,
+                                                  "hsi_frequency": 1}}  # fmt: skip
+    cloud.raw("services", again)
+    reply = cloud.wait_for("services_reply", lambda b: b.get("tid") == "enter-2", timeout=10)[-1]["data"]
+    assert reply == {"result": 0, "output": {"osd_frequency": 30, "hsi_frequency": 1}}, reply
+    heartbeat()
+    pushed_from = time.monotonic()
+    for _ in range(10):
+        seq += 1
+        _down(cloud, "stick_control", {"roll": 1024, "pitch": 1354, "throttle": 1024, "yaw": 1024}, seq=seq)
+        time.sleep(0.1)
+    assert cloud.find("drc/up", lambda b: b["method"] == "stick_control") == refused  # none refused now
+    assert math.hypot(osd()["speed_x"], osd()["speed_y"]) > 2.0  # driving again, 5 m/s asked for
+    pushes = len(cloud.times("drc/up", "osd_info_push", since=pushed_from))
+    assert pushes >= 15, pushes  # 30 Hz asked of the pushes (10 Hz before): at least 15 a second seen
+
     # five drc_mode_exit copies (one tid): all answered 0, the session ends once
     exit_ = {"tid": "exit-1", "bid": "b-exit", "timestamp": int(time.time() * 1000),
              "method": "drc_mode_exit", "data": ""}  # fmt: skip

@@ -143,6 +143,13 @@ class Harness:
             self.hb_at = event.at
             self.estop_hold = False
             self.last_seq = None
+        renewed = isinstance(event, ds.Enter) and ds.Reply(event.request, 0) in actions
+        if renewed and self.m.state in (ds.State.ACTIVE, ds.State.HOLDING):
+            # a fresh enter of the live session (answered at once) ends the emergency stop's hold: the
+            # set-point stays zero until a stick (issue #33); the seq sequence goes on
+            moved = [a for a in actions if isinstance(a, ds.Motion) and a.setpoint != ds.ZERO]
+            assert not moved, f"an enter moved a device: {moved}"
+            self.estop_hold = False
         if isinstance(event, ds.EStop) and self.m.state is ds.State.HOLDING:
             self.estop_hold = True
         stop = (ds.EStop, ds.BrokerLost, ds.AuthorityLost, ds.Exit, ds.Shutdown)
@@ -624,3 +631,42 @@ def test_a_stick_refused_for_an_automatic_task_says_why() -> None:
     assert h.answers[req] == [314000] and h.setpoint == ds.ZERO
     replies = [a for a in actions if isinstance(a, ds.StickReply)]
     assert replies[0].reason == reason
+
+
+def test_a_fresh_enter_ends_the_emergency_stop_and_increasing_seqs_drive_again() -> None:
+    """Issue #33: after drone_emergency_stop, a client whose seq only increases was locked out until it
+    restarted (only a seq 0 released the stop). A fresh drc_mode_enter of the same session releases it:
+    nothing moves until the next stick, which drives with the next seq; the old seq rule still holds."""
+    h = Harness()
+    sid = _live(h, "drc-a")
+    fwd = (1.0, 0.0, 0.0, 0.0)
+    h.feed(ds.Heartbeat(h.now, sid, h.request("heartbeat")))
+    h.feed(ds.Stick(h.now, sid, h.request("stick"), 7, fwd))
+    assert h.setpoint == fwd
+    h.feed(ds.EStop(h.now, sid, h.request("estop")))
+    held = h.request("stick")
+    h.feed(ds.Stick(h.now, sid, held, 8, fwd))
+    assert h.answers[held] == [ds.BUSY] and h.setpoint == ds.ZERO and h.m.failsafe == "emergency_stop"
+    again = h.request("enter")
+    actions = h.feed(ds.Enter(h.now, again, ds.LinkSpec("drc-a", True)))
+    assert h.answers[again] == [0] and h.m.session_id == sid  # the same session, not a new link
+    assert h.m.state is ds.State.ACTIVE and h.m.failsafe is None and h.setpoint == ds.ZERO
+    assert ds.Failsafe(None, h.now) in actions
+    old = h.request("stick")
+    h.feed(ds.Stick(h.now, sid, old, 6, fwd))
+    assert h.answers[old] == [ds.DRC_SEQ_TOO_OLD] and h.setpoint == ds.ZERO  # seq rules unchanged
+    driven = h.request("stick")
+    h.feed(ds.Stick(h.now, sid, driven, 9, fwd))
+    assert h.answers[driven] == [0] and h.setpoint == fwd
+
+
+def test_a_fresh_enter_does_not_end_a_heartbeat_hold() -> None:
+    h = Harness()
+    sid = _live(h, "drc-a")
+    h.now += CFG.heartbeat_timeout + 0.1
+    h.feed(ds.Tick(h.now))
+    assert h.m.failsafe == "heartbeat"
+    h.feed(ds.Enter(h.now, h.request("enter"), ds.LinkSpec("drc-a", True)))
+    held = h.request("stick")
+    h.feed(ds.Stick(h.now, sid, held, 1, (1.0, 0.0, 0.0, 0.0)))
+    assert h.answers[held] == [ds.DRC_HEARTBEAT_TIMEOUT] and h.setpoint == ds.ZERO

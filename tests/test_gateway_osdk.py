@@ -149,7 +149,6 @@ def test_java_sdk_takeoff_fields_are_honoured_or_refused(rig: dict[str, Any]) ->
         ({"commander_flight_mode": 0}, "commander_flight_mode"),
         ({"commander_flight_mode": 1}, "commander_flight_height"),
         ({"commander_flight_height": 50.0}, "commander_flight_height"),
-        ({"commander_mode_lost_action": 1, "exit_wayline_when_rc_lost": 0}, "commander_mode_lost_action"),
         (
             {"simulate_mission": {"is_enable": 1, "latitude": HOME[0], "longitude": HOME[1]}},
             "simulate_mission",
@@ -172,6 +171,45 @@ def test_java_sdk_takeoff_fields_are_honoured_or_refused(rig: dict[str, Any]) ->
     assert fc.inspect(lambda m: (m.upload.info["action_on_rc_lost"], m.go_home_altitude_m)) == (0, 60.0)
     statuses = [(e["status"], e["way_point_index"]) for e in _events(cloud, "takeoff_to_point_progress")]
     assert statuses[-2:] == [("wayline_ok", 3), ("task_finish", 3)], statuses
+
+
+@pytest.mark.slow
+def test_the_demo_webs_default_takeoff_flies_each_phase_with_its_rc_loss_action(rig: dict[str, Any]) -> None:
+    """Issue #33: DJI's Cloud-API-Demo-Web take-off form as it opens (rc_lost_action 2,
+    exit_wayline_when_rc_lost 1, rth_mode 1, commander_mode_lost_action 0, commander_flight_mode 1,
+    rth_altitude 100) was refused (325001: "disagrees"). The two fields govern different phases
+    (docs/cloud-api.md): the climb to the safe take-off height is flown as a mission that exits on RC loss
+    (action_on_rc_lost 0), the flight to the point as one that continues (1); the aircraft reaches the
+    target and the events read as one flight."""
+    fc, cloud = rig["fc"], rig["cloud"]
+    assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
+    demo_web = {"rc_lost_action": 2, "exit_wayline_when_rc_lost": 1, "rth_mode": 1,
+                "commander_mode_lost_action": 0, "commander_flight_mode": 1, "commander_flight_height": 22.0,
+                "rth_altitude": 100, "max_speed": 15}  # fmt: skip
+    data = _takeoff_data(10.0, 22.0, flight_id="demo-web-1", **demo_web)  # short: a few seconds
+    reply = cloud.service("takeoff_to_point", data)["data"]
+    assert reply == {"result": 0}, reply
+    missions: list[tuple[int, int]] = []  # (waypoints, action_on_rc_lost) of each upload, in order
+
+    def watch() -> bool:
+        up = fc.inspect(
+            lambda m: (
+                None if m.upload is None else (m.upload.info["length"], m.upload.info["action_on_rc_lost"])
+            )
+        )
+        if up is not None and (not missions or missions[-1] != up):
+            missions.append(up)
+        return any(e["status"] == "task_finish" for e in _events(cloud, "takeoff_to_point_progress"))
+
+    wait_until(watch, 60, what="take-off task finished", interval=0.05)
+    # the climb exits on RC loss, the flight to the point (up to 22 m, across at it) continues
+    assert missions == [(2, 0), (3, 1)], missions
+    n, e, up = fc.inspect(lambda m: (m.n, m.e, m.u))
+    assert math.dist((n, e, up), (10.0, 0.0, 22.0)) < 3.0, (n, e, up)  # at the target, 22 m above home
+    assert fc.inspect(lambda m: m.go_home_altitude_m) == 100.0
+    statuses = [(e["status"], e["way_point_index"]) for e in _events(cloud, "takeoff_to_point_progress")]
+    assert statuses[0] == ("task_ready", 0) and statuses[-2:] == [("wayline_ok", 2), ("task_finish", 2)]
+    assert all(s in ("task_ready", "wayline_progress", "wayline_ok", "task_finish") for s, _ in statuses)
 
 
 def test_activation_topology_and_osd(rig: dict[str, Any]) -> None:

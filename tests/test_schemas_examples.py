@@ -289,11 +289,63 @@ def test_drc_password_is_masked_unless_revealed() -> None:
     assert enter.mqtt_broker.password.get_secret_value() == "jwt_token"
 
 
-@pytest.mark.parametrize("frequency", [0, 31, 10.5, "10"])
-def test_drc_frequencies_are_1_to_30_hz(frequency: Any) -> None:
+@pytest.mark.parametrize("frequency", [0, -1, 10.5, "10", "50", True])
+def test_drc_frequencies_are_positive_integers(frequency: Any) -> None:
     data = _seed(TopicKind.SERVICES, "drc_mode_enter")["data"]
-    with pytest.raises(ValidationError):
-        DrcModeEnter.model_validate({**data, "osd_frequency": frequency})
+    for field in ("osd_frequency", "hsi_frequency"):
+        with pytest.raises(ValidationError):
+            DrcModeEnter.model_validate({**data, field: frequency})
+
+
+@pytest.mark.parametrize("frequency", [30, 31, 50, 1000])
+def test_drc_frequencies_above_30_hz_are_read_as_asked(frequency: int) -> None:
+    """Issue #33: more than the device can do is no malformed request: read as asked (the DRC controller
+    pushes at 30 Hz and says so in the reply, tests/test_drc_interop.py); the schema: 30 is used at most."""
+    data = _seed(TopicKind.SERVICES, "drc_mode_enter")["data"]
+    read = DrcModeEnter.model_validate({**data, "osd_frequency": frequency, "hsi_frequency": frequency})
+    assert (read.osd_frequency, read.hsi_frequency) == (frequency, frequency)
+    schema = DrcModeEnter.model_json_schema()["properties"]["osd_frequency"]
+    assert schema["minimum"] == 1 and schema["x-used-at-most"] == 30
+
+
+@pytest.mark.parametrize(("text", "read"), [("true", True), ("false", False)])
+def test_the_tolerant_reader_takes_true_and_false_strings_for_booleans(text: str, read: bool) -> None:
+    """Issue #33: "enable_tls": "false" (github wudizhr/DJI_Cloud_API_demo) is read as false; only the exact
+    strings, only inbound (what the gateway sends stays strict)."""
+    data = _seed(TopicKind.SERVICES, "drc_mode_enter")["data"]
+    broker = data["mqtt_broker"]
+    assert (
+        DrcModeEnter.model_validate(
+            {**data, "mqtt_broker": {**broker, "enable_tls": text}}
+        ).mqtt_broker.enable_tls
+        is read
+    )
+    for wrong in ("True", "FALSE", "1", "0", "yes", "", 1, 0, None):
+        with pytest.raises(ValidationError):
+            DrcModeEnter.model_validate({**data, "mqtt_broker": {**broker, "enable_tls": wrong}})
+    schema = DrcModeEnter.model_json_schema()["$defs"]["MqttBroker"]
+    assert schema["x-tolerant-reader"]["boolean_string_fields"] == ["enable_tls"]
+
+
+@pytest.mark.parametrize(
+    "method", ["return_home", "flight_authority_grab", "drc_mode_exit", "fly_to_point_stop"]
+)
+def test_the_string_null_as_data_is_no_parameters(method: str) -> None:
+    """Issue #33: "data": "null" (a JSON string; github wudizhr/DJI_Cloud_API_demo's return_home) is read like
+    null, "" and {}: no parameters. Other strings are still refused."""
+    envelope = {"tid": "t-1", "bid": "b-1", "timestamp": 1, "method": method}
+    read = REGISTRY.validate(TopicKind.SERVICES, json.dumps({**envelope, "data": "null"}).encode())
+    assert read.method == method and read.data.model_dump() == {}
+    for wrong in ("NULL", "None", "{}", "x"):
+        with pytest.raises(ValidationError):
+            REGISTRY.validate(TopicKind.SERVICES, json.dumps({**envelope, "data": wrong}).encode())
+
+
+def test_the_string_null_is_no_parameters_only_where_none_are_needed() -> None:
+    envelope = {"tid": "t-1", "bid": "b-1", "timestamp": 1, "method": "fly_to_point", "data": "null"}
+    with pytest.raises(ValidationError) as caught:
+        REGISTRY.validate(TopicKind.SERVICES, json.dumps(envelope).encode())
+    assert "fly_to_id" in str(caught.value)  # the missing field is named
 
 
 @pytest.mark.parametrize(

@@ -282,18 +282,31 @@ def _integral_float(value: Any) -> bool:
     return type(value) is float and math.isfinite(value) and value.is_integer()
 
 
+def _tolerated_boolean(sample: Sample, path: tuple[Any, ...]) -> bool:
+    """A boolean field inside an inbound ``data``: the tolerant reader takes ``"true"``/``"false"`` for it
+    (schemas.base.read_integral_floats)."""
+    return sample.inbound and path[:1] == ("data",) and type(_get(sample.payload, path)) is bool
+
+
+def _boolean_string(value: Any) -> bool:
+    return value in ("true", "false")
+
+
 @st.composite
 def _mutation(draw: st.DrawFn, sample: Sample) -> tuple[tuple[Any, ...], Any]:
     path, node = draw(st.sampled_from(_mutable_paths(sample)))
     value = _get(sample.payload, path)
     options = [_wrong_types(value), *_out_of_range(value, node)]
     if path == ("data",) and sample.inbound:
-        # an inbound "data": "" means "no parameters" like null (DJI's reference cloud sends it):
-        # not a bad value, so it is no mutation here (test_schemas_examples covers it)
-        return path, draw(st.one_of(options).filter(lambda v: v != ""))
+        # an inbound "data": "" or "null" means "no parameters" like null (DJI's reference cloud, an
+        # RC-side client): not a bad value, so it is no mutation here (test_schemas_examples covers it)
+        return path, draw(st.one_of(options).filter(lambda v: v not in ("", "null")))
     if _tolerated_integer(sample, path, node):
         # 60.0 for an integer field is read as 60 there (the tolerant reader): no mutation either
         return path, draw(st.one_of(options).filter(lambda v: not _integral_float(v)))
+    if _tolerated_boolean(sample, path):
+        # "true"/"false" for a boolean field is read as the boolean there (the tolerant reader)
+        return path, draw(st.one_of(options).filter(lambda v: not _boolean_string(v)))
     return path, draw(st.one_of(options))
 
 
@@ -371,6 +384,12 @@ def test_every_leaf_rejects_a_wrong_type(sample: Sample) -> None:
                 read = sample.model.model_validate(_set(sample.payload, path, wrong))
                 assert json.loads(read.model_dump_json(context={"reveal_secrets": True})) == sample.payload
                 wrong = wrong + 0.5
+            if _tolerated_boolean(sample, path) and _boolean_string(wrong):
+                # the tolerant reader: "true"/"false" is read as the boolean ("True", "1" are still refused)
+                read = sample.model.model_validate(_set(sample.payload, path, wrong))
+                dumped = json.loads(read.model_dump_json(context={"reveal_secrets": True}))
+                assert _get(dumped, path) is (wrong == "true")
+                wrong = wrong.capitalize()
             _check_rejected(sample, _set(sample.payload, path, wrong), path)
 
 

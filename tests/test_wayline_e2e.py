@@ -4,6 +4,7 @@ checks the fingerprint, plans, and flies it on the simulated flight controller o
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import hmac
 import itertools
@@ -136,6 +137,19 @@ class ResourceAnswerer:
 
 @pytest.fixture
 def rig(broker: LocalBroker) -> Iterator[dict[str, Any]]:
+    with _rig(broker, grab=True) as made:
+        yield made
+
+
+@pytest.fixture
+def dock_rig(broker: LocalBroker) -> Iterator[dict[str, Any]]:
+    """The rig as DJI-Cloud-API-Demo's wayline job flow drives a dock: no flight_authority_grab, ever."""
+    with _rig(broker, grab=False) as made:
+        yield made
+
+
+@contextlib.contextmanager
+def _rig(broker: LocalBroker, *, grab: bool) -> Iterator[dict[str, Any]]:
     device = OsdkFcDevice(OsdkFcModel(home=HOME, home_altitude=HOME_ALT))
     pty = PtyEndpoint(device).start()
     settings = gateway_settings(
@@ -149,7 +163,8 @@ def rig(broker: LocalBroker) -> Iterator[dict[str, Any]]:
     try:
         cloud.wait_for("status", lambda b: [d["sn"] for d in b["data"]["sub_devices"]] == [SN], timeout=10)
         cloud.wait_for(f"{SN}/osd", lambda b: "latitude" in b["data"])
-        assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
+        if grab:
+            assert cloud.service("flight_authority_grab", {})["data"]["result"] == 0
         yield {"fc": device, "cloud": cloud, "gw": gw, "store": store, "files": files, "answerer": answerer,
                "pty": pty}  # fmt: skip
     finally:
@@ -299,9 +314,14 @@ def test_pause_holds_and_recovery_finishes(rig: dict[str, Any]) -> None:
     time.sleep(1.5)
     assert math.hypot(*fc.inspect(lambda m: (m.vn, m.ve))) < 0.5  # still holding
     assert _status(cloud, flight)[-1] == "paused"
-    # pause again: not running
-    assert cloud.service("flighttask_pause", None)["data"]["result"] == 319046
+    # pause again: already paused, so done (issue #33: 0, not 319046), and nothing new happens
+    again = cloud.service("flighttask_pause", None)["data"]
+    assert again == {"result": 0}, again
+    assert _status(cloud, flight)[-1] == "paused"
     assert cloud.service("flighttask_recovery", None)["data"]["result"] == 0
+    # recovery again while it runs: already running, so done as well
+    assert cloud.service("flighttask_recovery", None)["data"] == {"result": 0}
+    wait_until(lambda: math.hypot(*fc.inspect(lambda m: (m.vn, m.ve))) > 1.0, 10, what="flying again")
     wait_until(lambda: _status(cloud, flight)[-1] == "ok", 90, what="finished after recovery")
     assert cloud.service("flighttask_recovery", None)["data"]["result"] == 319044
 
@@ -649,3 +669,38 @@ def test_actions_the_aircraft_cannot_do_are_listed_or_refused_under_strict(rig: 
     assert strict["result"] == 314003
     assert "strict_actions" in strict["output"]["reason"] and "zoom" in strict["output"]["reason"]
     assert not rig["fc"].inspect(lambda m: m.in_air)
+
+
+def _service_raw(cloud: CloudClient, method: str, data: Any) -> dict[str, Any]:
+    """A service with ``data`` exactly as given (``"null"`` stays the JSON string), its reply."""
+    tid, bid = str(uuid.uuid4()), str(uuid.uuid4())
+    body = {"tid": tid, "bid": bid, "timestamp": int(time.time() * 1000), "method": method, "data": data}
+    cloud.publish(f"thing/product/{GW}/services", body)
+    return cloud.wait_for("services_reply", lambda b: b.get("tid") == tid, timeout=10)[-1]
+
+
+def test_a_dock_flow_without_a_grab_flies_and_returns_home_on_a_null_string(dock_rig: dict[str, Any]) -> None:
+    """Issue #33: DJI-Cloud-API-Demo's wayline job flow never sends flight_authority_grab (a dock owns its
+    aircraft): prepare and execute fly the route, the gateway takes SDK control itself; a return_home sent
+    as an RC-side client sends it (github wudizhr/DJI_Cloud_API_demo: "data": "null") brings it home.
+    Stick authority is not given by any of it: live control still needs the grab."""
+    cloud, fc = dock_rig["cloud"], dock_rig["fc"]
+    assert not fc.inspect(lambda m: m.sdk_control)
+    flight = _prepare_and_execute(dock_rig)
+    wait_until(
+        lambda: any(
+            e["data"]["output"]["ext"]["current_waypoint_index"] >= 1 for e in _progress(cloud, flight)
+        ),
+        60,
+        what="flying the route without a grab",
+    )
+    assert fc.inspect(lambda m: (m.sdk_control, m.in_air)) == (True, True)
+    reply = _service_raw(cloud, "return_home", "null")
+    assert reply["data"] == {"result": 0}, reply
+    wait_until(lambda: _status(cloud, flight)[-1:] == ["canceled"], 5, what="task canceled by return home")
+    wait_until(lambda: fc.inspect(lambda m: m.task == "landing"), 30, what="landing over home")
+    assert fc.inspect(lambda m: math.hypot(m.n, m.e)) < 2.0
+    # the cloud never grabbed, and the dock's own control grants it nothing: a fly-to still asks for the grab
+    point = {"latitude": HOME[0], "longitude": HOME[1], "height": HOME_ALT + 20.0}
+    refused = cloud.service("fly_to_point", {"fly_to_id": "after-rth", "max_speed": 5, "points": [point]})
+    assert refused["data"]["result"] == 319030, refused

@@ -19,7 +19,7 @@ from adapters.osdk import commands as cmds
 from adapters.osdk.wayline_plan import MISSION_MAX, PlanOptions, plan_route
 from adapters.wayline.kmz import Limits, load_route, parse_wpml, unpack_wpml
 from adapters.wayline.writer import ActionSpec, PointSpec, kmz_bytes, md5_hex, waylines_wpml
-from gateway.wayline.task import ON_SEGMENT, ON_WAYPOINT, Phase, TaskBook, break_point_at
+from gateway.wayline.task import ON_SEGMENT, ON_WAYPOINT, Phase, TaskBook, Verdict, break_point_at
 from tests.test_sans_io import ROOT, _imports
 
 HOME = (22.5431, 113.958)
@@ -375,10 +375,12 @@ def test_task_book_transitions_and_idempotence() -> None:
     book.entered(task)
     assert book.progress(task)["output"]["status"] == "in_progress"
     book.reached(task, 0, 0, 1)
-    assert book.pause()[0].ok
+    assert book.recovery() == (Verdict(), None)  # running: what recovery asks already holds, nothing to do
+    assert book.pause() == (Verdict(), task)
     book.paused(task)
-    assert book.progress(task)["output"]["status"] == "paused" and book.pause()[0].result == 319046
-    assert book.recovery()[0].ok
+    # issue #33: a second pause while paused is done already: 0 and nothing for the aircraft to do
+    assert book.progress(task)["output"]["status"] == "paused" and book.pause() == (Verdict(), None)
+    assert book.recovery() == (Verdict(), task)
     book.resumed(task)
     book.reached(task, 0, 1, 0)
     book.reached(task, 0, 2, 0)

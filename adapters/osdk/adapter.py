@@ -21,7 +21,8 @@ fly_to_point                 0x03 0x10 init (degrees → radians, WGS84 height �
 fly_to_point_stop            0x03 0x12 cancel → ``wayline_cancel``
 takeoff_to_point             0x01 0x01 take-off; once airborne a 2-point mission (straight up to
                              ``security_takeoff_height``, then the target) with
-                             ``takeoff_to_point_progress`` events
+                             ``takeoff_to_point_progress`` events; the climb is a mission of its
+                             own when its RC-loss action differs from the flight to the point's
 x_osdk_*                     the rest of seed 004 (extensions.py)
 ===========================  ======================================================================
 
@@ -1208,7 +1209,6 @@ class AircraftAdapter(SupervisedAdapter):
                 "rth_mode: an Onboard SDK flight controller returns home at its preset altitude "
                 "(rth_mode 1, rth_altitude); optimal-height return is not available"
             )
-        self._exit_on_rc_lost(data)  # the two spellings must agree
         mode = getattr(data, "commander_flight_mode", None)
         height = getattr(data, "commander_flight_height", None)
         if mode == 0:
@@ -1230,17 +1230,20 @@ class AircraftAdapter(SupervisedAdapter):
             )
 
     @staticmethod
-    def _exit_on_rc_lost(data: TakeoffToPoint) -> bool:
-        """Exit the mission when the RC is lost? ``commander_mode_lost_action`` (Cloud API 1.x) or the
-        older ``exit_wayline_when_rc_lost`` it replaces: 1 exit, 0 or absent continue; both given and
-        different is refused."""
+    def _exit_on_rc_lost(data: TakeoffToPoint) -> tuple[bool, bool]:
+        """Exit the mission when the RC is lost, (in the climb to ``security_takeoff_height``, in the flight
+        to the point)? 1 exit (the FC's RC-loss failsafe), 0 continue. DJI's current take-off page (Dock
+        2/3) requires ``commander_mode_lost_action``, the to-point flight's action; the Dock 1 page keeps
+        ``exit_wayline_when_rc_lost`` as deprecated, the wayline (take-off) phase's. So the commander field
+        governs the flight to the point and the deprecated one yields to it there (before Cloud API 1.x it
+        governed the whole flight: alone, it still does); the deprecated one governs the climb, which the
+        commander field does not speak of (absent, the climb does as the flight to the point). Neither:
+        continue, the seed's default."""
         old = getattr(data, "exit_wayline_when_rc_lost", None)
         new = getattr(data, "commander_mode_lost_action", None)
-        if old is not None and new is not None and int(old) != int(new):
-            raise InvalidParameters(
-                "commander_mode_lost_action: disagrees with exit_wayline_when_rc_lost (the same setting)"
-            )
-        return (new if new is not None else old) == 1
+        to_point = (new if new is not None else old) == 1
+        climb = to_point if old is None else old == 1
+        return climb, to_point
 
     def _takeoff_route(self, data: TakeoffToPoint) -> list[tuple[float, float, float]]:
         """The mission after the take-off (lat/lon degrees, height above take-off): straight up to
@@ -1305,8 +1308,13 @@ class AircraftAdapter(SupervisedAdapter):
             points = self._takeoff_route(data)
             task.points = len(points)
             # exit_wayline_when_rc_lost / commander_mode_lost_action: 1 exit → init action_on_rc_lost 0;
-            # 0 or absent → 1 continue (the seed's default)
-            await self._upload(points, data.max_speed, exit_on_rc_lost=self._exit_on_rc_lost(data))
+            # 0 or absent → 1 continue (the seed's default); one per phase (_exit_on_rc_lost)
+            climb_exit, to_point_exit = self._exit_on_rc_lost(data)
+            # a mission has one RC-loss action: when the phases differ the climb is a mission of its own
+            split = climb_exit != to_point_exit and len(points) > 1
+            if split and not await self._climb(task, points[0], data.max_speed, exit_on_rc_lost=climb_exit):
+                return
+            await self._upload(points, data.max_speed, exit_on_rc_lost=to_point_exit)
             await self.start_mission(task)
             self._remember(task)
         except DeviceRejected as exc:
@@ -1371,6 +1379,29 @@ class AircraftAdapter(SupervisedAdapter):
             return None
         self._notify("landing" if action == "landing" else "returning_home", f"{reason} ({where})", task_id)
         return words
+
+    async def _climb(
+        self, task: Task, top: tuple[float, float, float], speed: float, *, exit_on_rc_lost: bool
+    ) -> bool:
+        """The take-off phase as a mission of its own (straight up from where the aircraft hovers to
+        ``top``, with its own RC-loss action), flown for ``task``: True once it is up there; False when it
+        ended otherwise (reported as the take-off's end; a stop cancels the caller's coroutine)."""
+        t = self.telemetry
+        here = (t.latitude or 0.0, t.longitude or 0.0, t.height or 0.0)
+        climb = Task("takeoff", task.task_id, 2, offset=2)  # its waypoints are none of the cloud's
+        await self._upload([here, top], speed, exit_on_rc_lost=exit_on_rc_lost)
+        self.mission = climb  # the same take-off, its first phase: the FC's pushes go to it
+        self._stop_requested, self._disagree_since = None, None
+        await self.start_mission(climb)
+        await climb.done.wait()
+        if climb.finished and not climb.canceled and climb.failed is None and climb.dropped is None:
+            self.begin_mission(task)  # the flight to the point
+            return True
+        self.mission = task
+        task.failed, task.dropped, task.finished = climb.failed, climb.dropped, climb.finished
+        task.done.set()
+        await self._watch(task)
+        return False
 
     def _online_only(self, call: Handler) -> Handler:
         async def checked(data: Any) -> CallResult:

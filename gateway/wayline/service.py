@@ -19,6 +19,13 @@ Choices where WAYLINE-NOTES is silent (a DJI dock's behaviour where known):
   ``flighttask_execute`` answers at once and the run reports by progress events.
 * Before each run the gateway asks ``flighttask_resource_get``; an answer with a file is downloaded
   unless it has the fingerprint already verified; no answer (or an error) falls back to the prepared file.
+* **Dock semantics.** None of these services needs a ``flight_authority_grab`` first: a dock owns its
+  aircraft, and DJI's reference cloud (DJI-Cloud-API-Demo) runs its wayline jobs and return home without
+  one. Whatever moves the aircraft (execute, pause, recovery, return home and its cancel) obtains SDK
+  control of the FC itself (``01 00``, the runner's ``ensure_control``). That gives the cloud no stick
+  authority: live control (DRC) keeps its own rule (a grab first; docs/cloud-api.md). A pilot's RC that
+  owns the aircraft refuses the obtain: the run fails with 319030 (return home answers 314000 with the
+  FC's reason); a DRC session's sticks are refused (314000, naming the task) while the task flies.
 * ``return_home`` ends a running task ``canceled`` (break reason 1283 "user RTH") and flies the gateway's
   own way home: up to the RTH height over the aircraft, over home at that height, land. The RTH height is
   the last task's ``rth_altitude``, else its KMZ's ``globalRTHHeight``, else :data:`DEFAULT_RTH_ALTITUDE`.
@@ -115,8 +122,6 @@ RTH_SPEED = 10.0
 PROGRESS_PERIOD = 1.0
 _UNOBTAINABLE = int(ResultCode.WAYLINE_FILE_UNOBTAINABLE)
 METHODS = frozenset(spec.method for spec in WAYLINE_METHODS if spec.kind is TopicKind.SERVICES)
-#: Services that move the aircraft: flight authority first when the dispatcher requires it.
-_MOVING = frozenset({"flighttask_execute", "flighttask_recovery", "return_home", "return_home_cancel"})
 
 Result = tuple[int, dict[str, Any] | None]
 
@@ -140,7 +145,6 @@ class WaylineService:
         requests: CloudRequests,
         clock: Clock,
         metrics: Metrics,
-        require_authority: bool,
         fetch: Callable[[str], Awaitable[bytes]] = fetch_kmz,
         store: StateStore | None = None,
         strict_actions: bool = False,
@@ -151,7 +155,6 @@ class WaylineService:
         self.requests = requests
         self.clock = clock
         self.metrics = metrics
-        self.require_authority = require_authority
         self.fetch = fetch
         self.book = TaskBook()
         self._files: dict[str, asyncio.Task[_File]] = {}
@@ -195,12 +198,8 @@ class WaylineService:
         aircraft = self._aircraft()
         if aircraft is None:
             return ResultCode.METHOD_NOT_SUPPORTED, {"reason": "no aircraft here flies waylines"}
-        if (
-            method in _MOVING
-            and self.require_authority
-            and aircraft.info.sn not in self.devices.authority.flight
-        ):
-            return ResultCode.NO_FLIGHT_AUTHORITY, {"reason": "grab flight authority first"}
+        # dock semantics: no flight_authority_grab first; whatever moves the aircraft takes SDK control
+        # itself (runner.ensure_control), as a dock does for its own aircraft (module docstring)
         handler = getattr(self, "_" + method)
         result: Result = await handler(aircraft, data)
         return result
@@ -337,25 +336,28 @@ class WaylineService:
         return verdict.result, ({"reason": verdict.reason} if verdict.reason else None)
 
     async def _flighttask_pause(self, aircraft: Any, data: FlighttaskPause) -> Result:
-        return await self._hold_or_go(self.book.pause(), aircraft.wayline.pause, self.book.paused,
+        return await self._hold_or_go(aircraft, self.book.pause(), aircraft.wayline.pause, self.book.paused,
                                       ResultCode.WAYLINE_PAUSE_FAILED)  # fmt: skip
 
     async def _flighttask_recovery(self, aircraft: Any, data: FlighttaskRecovery) -> Result:
-        return await self._hold_or_go(self.book.recovery(), aircraft.wayline.resume, self.book.resumed,
-                                      ResultCode.WAYLINE_RESUME_FAILED)  # fmt: skip
+        return await self._hold_or_go(aircraft, self.book.recovery(), aircraft.wayline.resume,
+                                      self.book.resumed, ResultCode.WAYLINE_RESUME_FAILED)  # fmt: skip
 
     async def _hold_or_go(
         self,
+        aircraft: Any,
         decided: tuple[Verdict, WaylineTask | None],
         act: Callable[[], Awaitable[None]],
         done: Callable[[WaylineTask], None],
         failed: int,
     ) -> Result:
-        """Pause or recovery: the book's verdict, then the aircraft, then the book and a progress event."""
+        """Pause or recovery: the book's verdict, then the aircraft (SDK control first, as a dock takes it
+        for its own aircraft), then the book and a progress event."""
         verdict, task = decided
-        if task is None:
-            return verdict.result, {"reason": verdict.reason}
+        if task is None:  # refused, or already so (a second pause, a recovery of a running task): 0
+            return verdict.result, ({"reason": verdict.reason} if verdict.reason else None)
         try:
+            await aircraft.wayline.ensure_control()
             await act()
         except (DeviceRejected, DeviceTimeout, DeviceNotConnected) as exc:
             return failed, {"reason": str(exc)[:300]}
@@ -374,6 +376,7 @@ class WaylineService:
         runner = aircraft.wayline
         path = runner.return_home_plan(self._last_rth_altitude)
         try:
+            await runner.ensure_control()  # a dock's own aircraft: no grab from the cloud first
             if path is None:  # home unknown here or too close for a mission: the FC's own go home
                 await runner.go_home(flight_id or "return-home")
             else:
@@ -390,6 +393,7 @@ class WaylineService:
             self._rth = None
             return ResultCode.BUSY, {"reason": "the aircraft is not returning home"}
         try:
+            await aircraft.wayline.ensure_control()
             flying = await aircraft.wayline.cancel()
         except (DeviceRejected, DeviceTimeout, DeviceNotConnected) as exc:
             return ResultCode.BUSY, {"reason": str(exc)[:300]}

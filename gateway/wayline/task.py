@@ -20,7 +20,9 @@ PREPARED            expiry (PREPARE_TTL)   removed
 RUNNING             step / reached         RUNNING (sent until the aircraft enters the wayline, then
                                            in_progress)
 RUNNING             pause                  PAUSED (paused), only once flying: before that 319046
+PAUSED              pause                  PAUSED: 0, nothing sent (idempotent)
 PAUSED              recovery               RUNNING (in_progress)
+RUNNING             recovery               RUNNING: 0, nothing sent (idempotent)
 RUNNING/PAUSED      finished               ok
 RUNNING/PAUSED      failed(code)           failed, with the code as ``result`` and a break point
 RUNNING/PAUSED      stopped (RTH, stop)    canceled, with a break point
@@ -201,8 +203,12 @@ class TaskBook:
         return Verdict()
 
     def pause(self) -> tuple[Verdict, WaylineTask | None]:
+        """The verdict, and the task to pause (None: nothing to do on the aircraft). Pausing a paused task is
+        done already: 0, nothing sent (a cloud that resends, or a second operator, gets no error)."""
         task = self.active
-        if task is None or task.phase is Phase.PAUSED or not task.entered:
+        if task is not None and task.phase is Phase.PAUSED:
+            return Verdict(), None
+        if task is None or not task.entered:
             return Verdict(NOT_RUNNING, "no wayline is flying"), None
         return Verdict(), task
 
@@ -212,6 +218,8 @@ class TaskBook:
         task.mission_state = 7
 
     def recovery(self) -> tuple[Verdict, WaylineTask | None]:
+        """The verdict, and the task to resume (None: nothing to do on the aircraft). Recovering a running
+        task is done already: 0, nothing sent (the same rule as a second pause)."""
         task = self.active
         if task is None:
             done = [t for t in self.tasks.values() if t.phase is Phase.DONE and t.started_at is not None]
@@ -219,7 +227,7 @@ class TaskBook:
                 return Verdict(COMPLETED, "the task has ended"), None
             return Verdict(RESUME_FAILED, "no paused wayline"), None
         if task.phase is not Phase.PAUSED:
-            return Verdict(RESUME_FAILED, "the wayline is not paused"), None
+            return Verdict(), None  # running: what a recovery asks for already holds
         return Verdict(), task
 
     def resumed(self, task: WaylineTask) -> None:
