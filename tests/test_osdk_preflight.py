@@ -16,6 +16,7 @@ from adapters.clock import ManualClock
 from adapters.errors import DeviceError, DeviceRejected
 from adapters.osdk import wayline_plan
 from adapters.osdk.config import OsdkDeviceSettings
+from adapters.osdk.extensions import SafetyNotify
 from adapters.osdk.limits import MissionLimits, after_failure, check_mission, flat_distance
 from adapters.osdk.sim import OsdkFcModel
 from schemas.results import ResultCode
@@ -226,6 +227,8 @@ def test_a_take_off_whose_mission_the_fc_refuses_after_take_off_lands_again(
     )
     notes = world.events("x_osdk_safety_notify")
     assert any(n["action"] == "landing" and n["task_id"] == "t1" for n in notes)
+    for note in notes:  # what the northbound publishes (it drops what its model refuses)
+        SafetyNotify.model_validate(note)
 
 
 def test_a_take_off_to_point_broken_off_on_the_way_returns_home(

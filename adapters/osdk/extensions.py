@@ -176,9 +176,12 @@ class SafetyNotify(OutboundModel):
     ``stopped`` (in the air under SDK control with nothing driving it, after a restart or a reconnect:
     zero velocity and the brake were sent), ``mission_adopted`` (a waypoint mission was flying that this
     process had not started: it is followed and reported), ``mission_ended`` (the flight controller ended
-    a task's mission: an emergency stop, the RC taking over, a mission it dropped)."""
+    a task's mission: an emergency stop, the RC taking over, a mission it dropped), ``landing`` and
+    ``returning_home`` (a task failed after the take-off: the aircraft is not left where it failed)."""
 
-    action: Literal["stopped", "mission_adopted", "mission_ended"] = Field(description="What happened.")
+    action: Literal["stopped", "mission_adopted", "mission_ended", "landing", "returning_home"] = Field(
+        description="What happened."
+    )
     reason: str = Field(max_length=300, description="What the flight controller reported, in words.")
     task_id: str = Field(max_length=64, description="The task's flight_id or fly_to_id; empty if none.")
 
