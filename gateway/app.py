@@ -85,6 +85,7 @@ class GatewayApp:
         self.wayline: WaylineService | None = None  # flighttask_* / return_home* (gateway/wayline)
         self.cloud_control: CloudControl | None = None  # cloud_control_auth_request / _release
         self.store: StateStore | None = None  # what must outlive the process (gateway/store.py)
+        self._background: set[asyncio.Task[None]] = set()  # fire-and-forget work kept referenced
         self.observability: Observability | None = None  # /metrics, /healthz, /status, / (None: off)
         self.web: WebServer | None = None  # the aiohttp server (its own thread) that serves them
         #: told (topic, payload) of every message the northbound and the dispatcher publish, and of every
@@ -159,7 +160,7 @@ class GatewayApp:
                 gw, method, data, need_reply, bid=bid
             ),
             metrics=self.metrics,
-            on_change=drc.cloud_control_changed,
+            on_change=lambda: self._cloud_control_changed(loop),
         )
         drc.cloud_control = cloud_control.auth
         # the will and the clean goodbye are the same: a topology with no sub-devices (all offline)
@@ -196,6 +197,17 @@ class GatewayApp:
         finally:
             await self._shutdown(periodic, consumer, offline)
             await waylines  # ends with stop_event
+
+    def _cloud_control_changed(self, loop: asyncio.AbstractEventLoop) -> None:
+        """The cloud-control grant changed hands or ended: live control re-checks its session; a new
+        holder gets the aircraft's flight authority (the grant is the RC's hand-over: no grab follows)."""
+        assert self.drc is not None and self.cloud_control is not None
+        self.drc.cloud_control_changed()
+        holder = self.cloud_control.auth.holder
+        if holder is not None and self.dispatcher is not None:
+            task = loop.create_task(self.dispatcher.grant_flight(f"cloud control granted to {holder!r}"))
+            self._background.add(task)
+            task.add_done_callback(self._background.discard)
 
     def _serve_web(self, observability: Observability, loop: asyncio.AbstractEventLoop) -> None:
         """Serve the views (``/metrics``, ``/healthz``, ``/status``, the console unless disabled) on the

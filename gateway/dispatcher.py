@@ -54,7 +54,7 @@ from schemas import (
 from schemas.base import InboundModel
 from schemas.envelope import ErrorOutput, ResultReply, ServicesReplyMessage
 from schemas.registry import Registry
-from schemas.services import DrcModeEnter, PayloadAuthorityGrab
+from schemas.services import DrcModeEnter, FlightAuthorityGrab, PayloadAuthorityGrab
 
 log = logging.getLogger(__name__)
 
@@ -388,6 +388,20 @@ class Dispatcher:
         if isinstance(index, str) and index not in self.devices.authority.payloads:
             return ResultCode.NO_PAYLOAD_AUTHORITY, {"reason": "grab payload authority first"}
         return None
+
+    async def grant_flight(self, why: str) -> None:
+        """Flight authority for the cloud without a ``flight_authority_grab``: an RC Plus 2 / RC Pro client
+        asks ``cloud_control_auth_request`` (control key "flight") instead, and its grant is the hand-over
+        of the aircraft (DJI's RC DRC page: the pilot accepts, then the cloud flies). The aircraft is asked
+        for control as by a grab; a refusal is logged (live control stays refused with the reason)."""
+        if not self.devices.serving("flight_authority_grab"):
+            return
+        result, output = await self._grab_authority("flight_authority_grab", FlightAuthorityGrab())
+        if result != 0:
+            reason = (output or {}).get("reason")
+            log.warning("%s: the aircraft refused control (%s): %s", why, result, reason)
+        else:
+            log.info("%s: flight authority held for the cloud", why)
 
     async def _grab_authority(self, method: str, data: InboundModel) -> tuple[int, dict[str, Any] | None]:
         auth = self.devices.authority
