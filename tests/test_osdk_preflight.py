@@ -275,3 +275,20 @@ def test_the_progress_ext_carries_the_failure_reason_and_the_skipped_actions() -
     body = book.progress(task)
     assert body["output"]["ext"]["x_reason"].endswith("low battery (0xD9)") and body["result"] == 336217
     FlighttaskProgress.model_validate(body)
+
+
+def test_a_take_off_to_the_safe_height_straight_above_flies_a_two_waypoint_climb(world: World) -> None:
+    """A target straight above the take-off point at the safe height (an RC-side client's "go up"): the
+    route after the take-off is one point, which the FC refuses (0xE0: a mission needs two); the mission
+    starts where the aircraft hovers instead, and the take-off ends at the target."""
+    here = _north(world.model, 0.0)
+    result = world.call(lambda: world.adapter.call("takeoff_to_point", _takeoff(here, height=70.0)))
+    assert not isinstance(result, DeviceError), result
+    world.run(
+        60.0,
+        until=lambda: any(e["status"] == "task_finish" for e in world.events("takeoff_to_point_progress")),
+    )
+    statuses = [e["status"] for e in world.events("takeoff_to_point_progress")]
+    assert statuses[-2:] == ["wayline_ok", "task_finish"] and "wayline_failed" not in statuses, statuses
+    m = world.model
+    assert m.in_air and abs(m.u - 20.0) < 1.0 and math.hypot(m.n, m.e) < 1.0, (m.u, m.n, m.e)

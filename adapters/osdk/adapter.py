@@ -1262,6 +1262,10 @@ class AircraftAdapter(SupervisedAdapter):
         for point in route[1:]:
             if _distance_3d(kept[-1], point) >= MIN_WAYPOINT_SPACING:
                 kept.append(point)
+        if len(kept) == 1:
+            # a target straight above the take-off point at the safe height: a mission has at least two
+            # waypoints (one is "invalid mission data", 0xE0), so it starts where the aircraft hovers
+            kept.insert(0, (*here, min(float(t.height or 0.0), kept[0][2] - MIN_WAYPOINT_SPACING)))
         return kept
 
     async def _set_go_home_altitude(self, altitude: int) -> None:
@@ -1312,6 +1316,8 @@ class AircraftAdapter(SupervisedAdapter):
             climb_exit, to_point_exit = self._exit_on_rc_lost(data)
             # a mission has one RC-loss action: when the phases differ the climb is a mission of its own
             split = climb_exit != to_point_exit and len(points) > 1
+            if points[0][2] < float(data.security_takeoff_height):  # the target is the safe height above
+                split, to_point_exit = False, climb_exit  # the take-off point: it is all climb
             if split and not await self._climb(task, points[0], data.max_speed, exit_on_rc_lost=climb_exit):
                 return
             await self._upload(points, data.max_speed, exit_on_rc_lost=to_point_exit)
