@@ -165,8 +165,9 @@ class HeartBeat(InboundModel):
     """DRC heartbeat from the cloud (seed 003 § DRC-heart beat), about 1 Hz.
 
     Decisions (PROTOCOL-NOTES: real clouds differ): the send time may be ``timestamp`` or ``ts``, inside
-    ``data`` or beside it; ``seq`` inside or beside; inside wins. ``seq`` is optional (a heartbeat's job is
-    liveness; some web clients send none). The gateway echoes both on drc/up as ``seq``/``timestamp``.
+    ``data`` or beside it (inside wins); ``seq`` inside (seed 003) or beside (the newer envelope, which wins
+    when both are given). ``seq`` is optional (a heartbeat's job is liveness; some web clients send none).
+    The gateway echoes both in ``data`` and, when the request had ``seq`` beside ``data``, ``seq`` there too.
     """
 
     envelope_fields: ClassVar[dict[str, tuple[str, ...]]] = {

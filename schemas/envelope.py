@@ -19,8 +19,9 @@ Decisions:
   osd/state (cloud stacks route sub-device telemetry by it) and optional elsewhere (the seed's replies,
   events and update_topo examples omit it; the gateway fills it when it knows it).
 - DRC down: ``seq`` may sit beside ``data`` instead of inside; heart_beat's ``timestamp`` may be spelled
-  ``ts`` or sit beside ``data``. The envelope folds them into ``data`` (inside wins when both are given), so
-  handlers see one shape. Each data model lists what it takes from beside ``data`` in ``envelope_fields``.
+  ``ts`` or sit beside ``data``. The envelope folds them into ``data`` (inside wins when both are given,
+  except ``seq``, where the newer envelope's top-level value wins: ``BESIDE_WINS``), so handlers see one
+  shape. Each data model lists what it takes from beside ``data`` in ``envelope_fields``.
 - The seed's events examples omit ``method``; the table names it and the gateway always sends it.
 """
 
@@ -228,6 +229,14 @@ class StateMessage(TelemetryMessage):
     kind = TopicKind.STATE
 
 
+#: Fields a DRC message may carry beside ``data`` where the top-level value wins over one inside: ``seq`` sits
+#: at the top level in the newer DRC envelope (DJI's Dock 2/3 and RC Plus 2 DRC pages: ``stick_control``,
+#: ``drc_gimbal_reset``; newer clients send ``heart_beat`` so too and match answers on it), and in
+#: ``data`` in seed 003's. Other fields (a heartbeat's ``timestamp``) keep "inside wins": the top-level
+#: ``timestamp`` of the newer envelope is the message's send time, not the heartbeat's.
+BESIDE_WINS = frozenset({"seq"})
+
+
 class DrcDownMessage(Envelope):
     """A DRC message from the cloud: ``method``, ``data``, maybe ``seq``/``timestamp`` beside ``data``."""
 
@@ -249,8 +258,14 @@ class DrcDownMessage(Envelope):
         fold: dict[str, tuple[str, ...]] = getattr(data_model, "envelope_fields", {})
         data = dict(value["data"])
         for outer, inner_names in fold.items():
-            # Inside wins: only a value missing under every accepted inner spelling is taken from beside.
-            if outer in value and not any(name in data for name in inner_names):
+            if outer not in value:
+                continue
+            if outer in BESIDE_WINS:  # the newer envelope's own field: it wins over a copy in data
+                for name in inner_names:
+                    data.pop(name, None)
+                data[outer] = value[outer]
+            elif not any(name in data for name in inner_names):
+                # Inside wins: only a value missing under every accepted inner spelling is taken from beside.
                 data[outer] = value[outer]
         return {**value, "data": data}
 

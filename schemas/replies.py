@@ -219,13 +219,18 @@ def reply_for(
 
 
 def echo_heart_beat(request: DrcDownMessage) -> Envelope:
-    """The drc/up echo of a heart_beat: the received ``seq`` and ``timestamp`` as they came."""
+    """The drc/up echo of a heart_beat: the received ``seq`` and ``timestamp`` as they came.
+
+    ``seq`` goes where the request had it, in both places when in doubt: always in ``data`` (seed 003's
+    shape, which older clients read) and also at the top level when the request carried it there (the newer
+    envelope, whose clients match the answer on the top-level ``seq``)."""
     data = request.data
     if not isinstance(data, HeartBeat):
         raise ValueError("not a heart_beat")
     cls = message_class(TopicKind.DRC_UP, "heart_beat", HeartBeatEcho)
+    beside = {"seq": request.seq} if request.seq is not None else {}
     return cls.model_validate(
-        {"method": "heart_beat", "data": {"seq": data.seq, "timestamp": data.timestamp}}
+        {"method": "heart_beat", "data": {"seq": data.seq, "timestamp": data.timestamp}, **beside}
     )
 
 

@@ -19,7 +19,8 @@
   (``cloud_control_auth_request``, ``drc_mode_enter`` with ``"enable_tls": "false"`` and
   ``osd_frequency`` 50, ``fly_to_point``, ``return_home`` with ``"data": "null"``) and
   ``DRC_controler.py`` (``stick_control`` and ``heart_beat`` with ``seq`` at the top level, the heartbeat's
-  timestamp in hundredths of a second). It never grabs: the granted cloud control is the hand-over.
+  timestamp in hundredths of a second; each heartbeat must come back with that ``seq`` at the top level,
+  issue #38). It never grabs: the granted cloud control is the hand-over.
 """
 
 from __future__ import annotations
@@ -246,9 +247,15 @@ def test_the_rc_side_clients_flow_flies_by_sticks_and_returns_home_on_a_null_str
     seq = 0
     start = sim.position()
     deadline = time.monotonic() + 2.5
+    delays: list[float] = []
     while time.monotonic() < deadline:
         beat = {"data": {"timestamp": int(time.time() * 100)}, "method": "heart_beat", "seq": seq}
+        sent = time.monotonic()
         cloud.publish(down, json.dumps(beat), qos=1)
+        # the client matches the echo on the top-level seq (issue #38): it must be there, this seq
+        cloud.wait_for("/drc/up", lambda b, s=seq: b.get("method") == "heart_beat" and b.get("seq") == s,
+                       timeout=2)  # fmt: skip
+        delays.append(time.monotonic() - sent)
         seq += 1
         for _ in range(5):  # forward at half pitch, 10 Hz
             stick = {"seq": seq, "method": "stick_control",
@@ -257,6 +264,7 @@ def test_the_rc_side_clients_flow_flies_by_sticks_and_returns_home_on_a_null_str
             seq += 1
             time.sleep(0.1)
     wait_until(lambda: _flat(start, sim.position()) > 5.0, 5, what="the sticks moved the aircraft")
+    assert sorted(delays)[len(delays) // 2] < 0.1, delays  # echoed within 100 ms (the median: 2 busy cores)
     ups = cloud.find("/drc/up", lambda b: b.get("method") == "osd_info_push")
     assert ups, "no osd_info_push on drc/up"
     errors = cloud.find("/drc/up", lambda b: b.get("method") == "stick_control"

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 from pydantic import ValidationError
 
-from schemas import Profile, ResultCode, TopicKind, default_registry
+from schemas import Profile, ResultCode, TopicKind, default_registry, echo_heart_beat
 from schemas.drc import DroneControl, HeartBeat, HsiInfoPush
 from schemas.examples import CLOUD_SHAPES, GATEWAY_EXAMPLES, SEED_003, CloudShape, SeedExample
 from schemas.services import CameraFocalLengthSet, DrcModeEnter, FlyToPoint, TakeoffToPoint
@@ -183,9 +183,9 @@ def test_drone_control_absent_axes_are_zero_and_seq_may_sit_beside_data() -> Non
         TopicKind.DRC_DOWN, b'{"method": "drone_control", "seq": 7, "data": {"y": 1.5}}'
     )
     assert message.data == DroneControl(seq=7, x=0.0, y=1.5, h=0.0, w=0.0)
-    # inside wins over beside
+    # the newer envelope's top-level seq wins over one in data (envelope.BESIDE_WINS)
     message = REGISTRY.validate(TopicKind.DRC_DOWN, {"method": "drone_control", "seq": 9, "data": {"seq": 8}})
-    assert message.data.seq == 8
+    assert message.data.seq == 9
     with pytest.raises(ValidationError):  # no seq anywhere
         REGISTRY.validate(TopicKind.DRC_DOWN, {"method": "drone_control", "data": {"x": 1}})
 
@@ -368,3 +368,39 @@ def test_outbound_result_codes_follow_the_six_digit_rule() -> None:
         event["data"]["result"] = bad
         with pytest.raises(ValidationError):
             REGISTRY.validate(TopicKind.EVENTS, event)
+
+
+@pytest.mark.parametrize(
+    ("raw", "echo"),
+    [
+        # seed 003: seq in data, echoed in data only
+        (
+            {"method": "heart_beat", "data": {"seq": 10, "timestamp": 1670415891013}},
+            {"method": "heart_beat", "data": {"seq": 10, "timestamp": 1670415891013}},
+        ),
+        # the newer envelope: seq at the top level, echoed there and in data
+        (
+            {"seq": 1795807953068, "method": "heart_beat", "data": {"timestamp": 1670415891013}},
+            {
+                "method": "heart_beat",
+                "seq": 1795807953068,
+                "data": {"seq": 1795807953068, "timestamp": 1670415891013},
+            },
+        ),
+        # both: the top-level (newer) one wins, in both places
+        (
+            {"seq": 12, "method": "heart_beat", "data": {"seq": 11, "timestamp": 1670415891013}},
+            {"method": "heart_beat", "seq": 12, "data": {"seq": 12, "timestamp": 1670415891013}},
+        ),
+        # none: none echoed
+        (
+            {"method": "heart_beat", "data": {"timestamp": 1670415891013}},
+            {"method": "heart_beat", "data": {"timestamp": 1670415891013}},
+        ),
+    ],
+)
+def test_heart_beat_echo_carries_seq_where_the_request_had_it(
+    raw: dict[str, Any], echo: dict[str, Any]
+) -> None:
+    message = REGISTRY.validate(TopicKind.DRC_DOWN, raw)
+    assert json.loads(echo_heart_beat(message).model_dump_json(exclude_none=True)) == echo
