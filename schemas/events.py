@@ -95,13 +95,23 @@ class FlyToPointProgress(OutboundModel):
 
 
 class TakeoffToPointProgress(OutboundModel):
-    """One-key take-off progress (seed 003 § Event notification of one-key taking off result)."""
+    """One-key take-off progress (seed 003 § Event notification of one-key taking off result;
+    ``remaining_distance`` and ``remaining_time`` as DJI's newer docs define them for the flyto event, Dock
+    2/3 § DRC, docs/cloud-api.md). The gateway sends ``task_ready``, ``wayline_progress`` (at each point and
+    periodically), one terminal status (``wayline_ok``, ``wayline_failed`` or ``wayline_cancel``) and then
+    ``task_finish`` with the same ``result``, in every path."""
 
     status: TakeoffStatus = Field(description=_TAKEOFF_STATUS)
     result: ResultValue
     flight_id: Text = Field(min_length=1, description="The flight_id of the takeoff_to_point request.")
     track_id: Text = Field(description="Wayline track id (may be empty).")
     way_point_index: Int = Field(ge=0, description="Index of the point being flown.")
+    remaining_distance: Remaining | None = Field(
+        default=None, description="Distance left to fly (m).", json_schema_extra={"x-unit": "m"}
+    )
+    remaining_time: Remaining | None = Field(
+        default=None, description="Time left at the planned speed (s).", json_schema_extra={"x-unit": "s"}
+    )
     x_reason: Reason | None = Field(
         default=None,
         description="Extension. Why the task failed, for a human (failure events; `result` is the code).",

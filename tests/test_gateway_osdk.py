@@ -236,7 +236,9 @@ def test_takeoff_fly_to_and_stop(rig: dict[str, Any]) -> None:
     wait_until(
         lambda: any(e["status"] == "task_finish" for e in takeoff()), 40, what="take-off task finished"
     )
+    # the periodic wayline_progress between the points (issue #38) repeat the last one: collapsed here
     progress = [(e["status"], e["way_point_index"]) for e in takeoff()]
+    progress = [p for i, p in enumerate(progress) if i == 0 or p != progress[i - 1]]
     expected = [("task_ready", 0), ("wayline_progress", 0), ("wayline_progress", 1), ("wayline_ok", 1)]
     assert progress == [*expected, ("task_finish", 1)], progress
     assert all(e["flight_id"] == "flight-1" and e["result"] == 0 for e in takeoff())

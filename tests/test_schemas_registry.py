@@ -170,8 +170,9 @@ def test_drc_replies_have_no_tid_bid_and_echo_heartbeats() -> None:
         "data": {"result": 319033, "output": {"seq": 4}},
     }
     beat = registry.validate(TopicKind.DRC_DOWN, {"method": "heart_beat", "seq": 3, "data": {"ts": 99}})
-    assert json.loads(echo_heart_beat(beat).model_dump_json()) == {
+    assert json.loads(echo_heart_beat(beat).model_dump_json()) == {  # seq where it came, and in data
         "method": "heart_beat",
+        "seq": 3,
         "data": {"seq": 3, "timestamp": 99},
     }
     with pytest.raises(ValueError, match="not answered with a result"):

@@ -885,6 +885,7 @@ class AircraftAdapter(SupervisedAdapter):
             display_mode=t.display_mode,
             mission_running=self.fc_mission_running(),
             mission_kind=task.kind if task is not None and task.live else None,
+            taking_off=task is not None and task.kind == "takeoff" and task.taking_off(t.height),
         )
 
     def aircraft_pose(self) -> AircraftPose | None:
@@ -1022,6 +1023,14 @@ class AircraftAdapter(SupervisedAdapter):
                     ResultCode.BUSY, f"waypoint {index} acknowledged as {ack.fields.get('index')}"
                 )
 
+    def _remaining_all(self, task: Task) -> float:
+        """Metres of ``task``'s whole path from where the aircraft stands (before it started)."""
+        t = self.telemetry
+        if not task.path or t.latitude is None:
+            return 0.0
+        here = (t.latitude, t.longitude or 0.0, t.height or 0.0)
+        return sum(_leg(a, b) for a, b in zip([here, *task.path], task.path, strict=False))
+
     def _remaining(self, task: Task, status: str) -> float:
         """Metres left to fly: from where the aircraft is to the next point not yet reached, then along
         the remaining legs; 0 once arrived."""
@@ -1057,11 +1066,24 @@ class AircraftAdapter(SupervisedAdapter):
                 data["x_reason"] = reason[:300]
             self._sink.event(self.info.sn, "fly_to_point_progress", data, need_reply=need_reply)
         else:
+            terminal = status in ("wayline_ok", "wayline_failed", "wayline_cancel")
+            if task.end_told or status == "task_finish":
+                return  # one terminal status, then task_finish (below); nothing after it
+            left = self._remaining(task, status) if status != "task_ready" else self._remaining_all(task)
             data = {"flight_id": task.task_id, "track_id": "", "status": status, "result": result,
-                    "way_point_index": index}  # fmt: skip
+                    "way_point_index": index, "remaining_distance": round(left, 1),
+                    "remaining_time": round(left / task.speed, 1) if task.speed > 0 else 0.0}  # fmt: skip
             if reason:
                 data["x_reason"] = reason[:300]
-            self._sink.event(self.info.sn, "takeoff_to_point_progress", data, need_reply=True)
+            self._sink.event(self.info.sn, "takeoff_to_point_progress", data, need_reply=need_reply)
+            if terminal:  # every path ends with task_finish (DJI's last status), carrying the result
+                task.end_told = True
+                self._sink.event(
+                    self.info.sn,
+                    "takeoff_to_point_progress",
+                    {**data, "status": "task_finish"},
+                    need_reply=True,
+                )
 
     def _start_watch(self, task: Task) -> None:
         if self._mission_task is not None and not self._mission_task.done():
@@ -1069,7 +1091,7 @@ class AircraftAdapter(SupervisedAdapter):
         self._mission_task = asyncio.get_running_loop().create_task(self._watch(task))
 
     async def _watch(self, task: Task) -> None:
-        while task.kind == "fly_to" and not task.done.is_set():
+        while task.kind in ("fly_to", "takeoff") and not task.done.is_set():
             # between the waypoint events the flight reports itself periodically: a progress superseded
             # within the interval is not re-sent (need_reply 0); the events of a point, the end, a
             # cancel or a failure still ask for a reply
@@ -1093,9 +1115,7 @@ class AircraftAdapter(SupervisedAdapter):
             else:
                 await self._failed(task, ResultCode.BUSY, f"the flight controller ended it: {task.dropped}")
         elif task.finished:
-            self._progress(task, "wayline_ok", last)
-            if task.kind == "takeoff":
-                self._progress(task, "task_finish", last)
+            self._progress(task, "wayline_ok", last)  # a take-off's task_finish follows (_progress)
 
     async def _fly_to_point(self, data: FlyToPoint) -> CallResult:
         self._require_online()
@@ -1291,7 +1311,8 @@ class AircraftAdapter(SupervisedAdapter):
         if self.fw == "new":
             await self._set_go_home_altitude(int(data.rth_altitude))
         await self.flight_task("takeoff")
-        task = Task("takeoff", data.flight_id, 2)
+        task = Task("takeoff", data.flight_id, 2, path=route, climb_to=float(data.security_takeoff_height))
+        task.speed = max(1.0, min(float(data.max_speed), self.settings.mission_vel_cmd_range))
         self.begin_mission(task)
         self._progress(task, "task_ready", 0)
         if self._mission_task is not None and not self._mission_task.done():
@@ -1310,7 +1331,7 @@ class AircraftAdapter(SupervisedAdapter):
             await self._clock.sleep(0.1)
         try:
             points = self._takeoff_route(data)
-            task.points = len(points)
+            task.points, task.path = len(points), points
             # exit_wayline_when_rc_lost / commander_mode_lost_action: 1 exit → init action_on_rc_lost 0;
             # 0 or absent → 1 continue (the seed's default); one per phase (_exit_on_rc_lost)
             climb_exit, to_point_exit = self._exit_on_rc_lost(data)
@@ -1394,7 +1415,8 @@ class AircraftAdapter(SupervisedAdapter):
         ended otherwise (reported as the take-off's end; a stop cancels the caller's coroutine)."""
         t = self.telemetry
         here = (t.latitude or 0.0, t.longitude or 0.0, t.height or 0.0)
-        climb = Task("takeoff", task.task_id, 2, offset=2)  # its waypoints are none of the cloud's
+        # its waypoints are none of the cloud's; the same take-off phase and speed
+        climb = Task("takeoff", task.task_id, 2, offset=2, speed=task.speed, climb_to=task.climb_to)
         await self._upload([here, top], speed, exit_on_rc_lost=exit_on_rc_lost)
         self.mission = climb  # the same take-off, its first phase: the FC's pushes go to it
         self._stop_requested, self._disagree_since = None, None

@@ -70,7 +70,9 @@ DISPLAY_MODE_CODES: Mapping[int, int] = {
     DM_WAYPOINT: 5,  # wayline
     DM_FOLLOW_ME: 7,  # intelligent tracking
 }
-STANDBY, MANUAL, WAYLINE, RETURN_HOME, NOT_CONNECTED = 0, 3, 5, 9, 14
+STANDBY, MANUAL, AUTO_TAKEOFF, WAYLINE, RETURN_HOME, NOT_CONNECTED = 0, 3, 4, 5, 9, 14
+#: metres under a take-off's safe height at which its take-off phase ends (the FC's waypoint tolerance)
+CLIMB_REACHED = 1.0
 
 #: what each automatic display mode is, in words (sticks are refused while one flies the aircraft)
 AUTOMATIC = {
@@ -120,6 +122,20 @@ class Task:
     path: list[tuple[float, float, float]] = field(default_factory=list)  # lat, lon, m above take-off
     speed: float = 0.0  # the mission's planned speed (m/s)
     planned: list[dict[str, float]] = field(default_factory=list)  # the cloud's points (WGS84 height)
+    #: a take-off to point: the safe height (m above take-off) that ends its take-off phase (mode_code 4);
+    #: None once the aircraft got there (the fly-to phase, 5) or for any other task
+    climb_to: float | None = None
+    end_told: bool = False  # a take-off to point's terminal status (and task_finish) went out
+
+    def taking_off(self, height: float | None) -> bool:
+        """Is this take-off to point still climbing to its safe height? Ends for good once the aircraft
+        got within :data:`CLIMB_REACHED` of it (a fly-to phase lower than the safe height stays 5)."""
+        if self.climb_to is None or not self.live:
+            return False
+        if height is not None and height >= self.climb_to - CLIMB_REACHED:
+            self.climb_to = None
+            return False
+        return True
 
     @property
     def live(self) -> bool:
@@ -164,11 +180,17 @@ def mode_code(
     display_mode: int | None,
     mission_running: bool,
     mission_kind: str | None,
+    taking_off: bool = False,
 ) -> int:
     """The Cloud API ``mode_code`` from what the FC reports: not connected 14; the FC's own take-off 4
     (from the moment it starts, on the ground too); on the ground 0; a waypoint mission the FC flies 5,
     or 9 when that mission is the gateway's way home (``mission_kind`` is the intent that names it; the FC
-    only says a mission runs); else by display mode (:data:`DISPLAY_MODE_CODES`), 3 otherwise."""
+    only says a mission runs); else by display mode (:data:`DISPLAY_MODE_CODES`), 3 otherwise.
+
+    ``taking_off``: a ``takeoff_to_point`` still climbing to its safe height (``Task.taking_off``). DJI's
+    aircraft reports 4 "auto take-off" for the whole take-off phase, the FC's own take-off and the climb
+    that follows (our climb is a waypoint mission, which alone would read 5); the fly-to phase after it
+    reads 5 like a ``fly_to_point`` (docs/osdk.md)."""
     if not connected:
         return NOT_CONNECTED
     if display_mode in (DM_ASSISTED_TAKEOFF, DM_AUTO_TAKEOFF):
@@ -177,6 +199,8 @@ def mode_code(
         return STANDBY
     if display_mode in (DM_GO_HOME, DM_AUTO_LANDING, DM_FORCED_LANDING):
         return DISPLAY_MODE_CODES[display_mode]  # the FC's own automatic flight, whatever came before
+    if taking_off:
+        return AUTO_TAKEOFF
     if mission_running:
         return RETURN_HOME if mission_kind == "return_home" else WAYLINE
     return DISPLAY_MODE_CODES.get(display_mode if display_mode is not None else -1, MANUAL)
