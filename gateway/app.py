@@ -163,7 +163,8 @@ class GatewayApp:
             on_change=lambda: self._cloud_control_changed(loop),
         )
         drc.cloud_control = cloud_control.auth
-        # the will and the clean goodbye are the same: a topology with no sub-devices (all offline)
+        # the will and the clean goodbye have one shape: a topology with no sub-devices (all offline); the
+        # will is fixed at connect (MQTT), so the clean stop builds a fresh one (_shutdown)
         offline = (topic(TopicKind.STATUS, gw), nb.topology(offline=True))
         bridge.set_will(*offline)
         self.dispatcher = Dispatcher(
@@ -266,6 +267,10 @@ class GatewayApp:
                 # real time: a stopping gateway stops even when nobody advances a test's clock
                 await asyncio.wait_for(self.dispatcher.drain(), 2.0)
         if self.bridge is not None:
+            if self.northbound is not None:
+                # a fresh goodbye: the will was fixed at connect (its tid and timestamp are the connect's);
+                # a clean stop tells the time it went offline (issue #38)
+                offline = (offline[0], self.northbound.topology(offline=True))
             await asyncio.to_thread(self.bridge.stop, offline)
         await asyncio.gather(*(a.stop() for a in self.devices), return_exceptions=True)
         if self.web is not None:

@@ -10,6 +10,7 @@ import re
 import signal
 import subprocess
 import sys
+import time
 from typing import Any
 
 import pytest
@@ -163,12 +164,15 @@ def test_sigterm_stops_motion_publishes_offline_and_exits_0(broker: LocalBroker,
         assert cloud.service("camera_screen_drag", drag)["data"]["result"] == 0
         assert gimbal.model.pitch.speed == 10.0
         cloud.clear()
+        stopped_at = int(time.time() * 1000)
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(10) == 0
         # motion stopped before the exit: zero speed, speed control released
         assert gimbal.model.pitch.speed == 0.0 and gimbal.model.speed_until == 0.0
         offline = cloud.wait_for("status", timeout=5)[-1]
         assert offline["data"]["sub_devices"] == []
+        # a fresh goodbye, not the will fixed at connect: stamped when it went offline (issue #38)
+        assert offline["timestamp"] >= stopped_at, (offline["timestamp"], stopped_at)
     finally:
         if proc.poll() is None:
             proc.kill()
