@@ -219,3 +219,29 @@ def test_return_home_on_the_ground_is_refused_naming_why_and_nothing_moves(rig: 
     time.sleep(0.5)
     assert fc.inspect(lambda m: (m.in_air, m.motors_on, m.task)) == (False, False, "ground")
     assert fc.inspect(lambda m: m.actions["flight_task"]) == 0
+
+
+@pytest.mark.parametrize("phase", ["returning", "landing"])
+def test_return_home_cancel_from_each_phase_leaves_it_hovering(rig: dict[str, Any], phase: str) -> None:
+    """return_home_cancel while it flies home (the FC's exit go home) and while it lands at home (its
+    exit landing): 0, the aircraft hovers in the air where it was, and the osd leaves 9 / 10."""
+    cloud, fc = rig["cloud"], rig["fc"]
+    _takeoff(cloud, 0.0 if phase == "landing" else 60.0, 20.0)
+    _takeoff_done(cloud)
+    _hover(fc)
+    assert cloud.service("return_home", None)["data"]["result"] == 0
+    task = "landing" if phase == "landing" else "go_home"
+    wait_until(lambda: fc.inspect(lambda m: m.task) == task, 10, what=task)
+    if phase == "returning":
+        wait_until(lambda: fc.inspect(lambda m: m.speed) > 3.0, 10, what="flying home")
+    else:
+        wait_until(lambda: fc.inspect(lambda m: m.u) < 19.0, 10, what="descending")
+    reply = cloud.service("return_home_cancel", None)["data"]
+    assert reply["result"] == 0, reply
+    _hover(fc)
+    assert fc.inspect(lambda m: (m.in_air, m.task)) == (True, "hover")
+    cloud.clear()
+    wait_until(lambda: len(_modes(cloud)) >= 2, 5, what="fresh osd")
+    assert not {9, 10} & set(_modes(cloud)[1:]), _modes(cloud)
+    # nothing returns any more: a second cancel says so
+    assert cloud.service("return_home_cancel", None)["data"]["result"] == 314000
