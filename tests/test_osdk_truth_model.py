@@ -255,13 +255,6 @@ class AircraftTruth(RuleBasedStateMachine):
         self._call(lambda: self.adapter.wayline.go_home("rth"))
 
     @rule()
-    def return_home_by_mission(self) -> None:
-        """The gateway's own way home (a two-waypoint mission), when it can build one."""
-        path = self.adapter.wayline.return_home_plan(30.0)
-        if path is not None:
-            self._call(lambda: self.adapter.wayline.return_home(path, 10.0, "rth"))
-
-    @rule()
     def return_home_cancel(self) -> None:
         if self.adapter.wayline.mission_running:
             self._call(self.adapter.wayline.cancel)

@@ -393,13 +393,16 @@ def test_return_home_ends_the_task_and_lands_at_home(rig: dict[str, Any]) -> Non
     home = info["planned_path_points"][-1]
     assert _distance(home["latitude"], home["longitude"], *HOME) < 1.0
     assert abs(home["height"] - (HOME_ALT + 40.0)) < 0.5  # rth_altitude 40 m above the take-off point
-    # the way home is a mission on the FC, and the osd says what it is: 9 return home, not 5 wayline
+    # the way home is the FC's go home, and the osd says what it is (its display mode, within a push or
+    # two of the stop): 9 return home, not 5 wayline
     cloud.clear()
-    wait_until(lambda: cloud.find(f"{SN}/osd", lambda b: "mode_code" in b["data"]), 5, what="a fresh osd")
-    assert _osd_mode(cloud) == 9
-    # over home, then the FC's landing (the mission's finish action 2); the descent itself is the FC's
+    wait_until(lambda: cloud.find(f"{SN}/osd", lambda b: b["data"].get("mode_code") == 9), 5, what="9")
+    # over home, then the FC's landing (its go home's end); the descent itself is the FC's
     wait_until(lambda: fc.inspect(lambda m: m.task == "landing"), 30, what="landing over home")
     assert fc.inspect(lambda m: math.hypot(m.n, m.e)) < 2.0
+    # its landing is part of the return: a cancel then exits the landing and the aircraft hovers (#37)
+    assert cloud.service("return_home_cancel", None)["data"]["result"] == 0
+    wait_until(lambda: fc.inspect(lambda m: m.in_air and m.task == "hover"), 5, what="hovering over home")
     assert cloud.service("return_home_cancel", None)["data"]["result"] == 314000  # no longer returning
 
 

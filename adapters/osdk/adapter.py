@@ -404,7 +404,7 @@ class AircraftAdapter(SupervisedAdapter):
         task = self.mission
         flying = True
         if task is not None and task.kind == "go_home" and task.live:
-            await self.flight_task("exit_go_home")  # the FC hovers where it is
+            await self._exit_go_home()  # the FC hovers where it is
         else:
             try:
                 await self.ground_station("wp_start_stop", {"start": 1})
@@ -423,6 +423,21 @@ class AircraftAdapter(SupervisedAdapter):
                     self._mission_task.cancel()
                 self._progress(task, "wayline_cancel", task.reached - task.offset)
         return flying
+
+    async def _exit_go_home(self) -> None:
+        """End the FC's go home in whichever phase it is: flying home (exit go home) or landing at home
+        (exit landing; the new firmware's task 14). The display mode says which; it lags the FC by up to
+        one push, so the other is tried when the first is refused."""
+        landing = self.telemetry.display_mode == DM_AUTO_LANDING
+        order = ["exit_landing", "exit_go_home"] if landing else ["exit_go_home", "exit_landing"]
+        order = [name for name in order if name in self.codes.tasks] or ["exit_go_home"]  # M100: refused
+        for k, name in enumerate(order):
+            try:
+                await self.flight_task(name)
+                return
+            except DeviceRejected:
+                if k == len(order) - 1:
+                    raise
 
     def mission_started(self, task: Task) -> None:
         """The FC acknowledged the start of ``task``'s mission: from now on it may disagree."""
@@ -1287,6 +1302,17 @@ class AircraftAdapter(SupervisedAdapter):
             # waypoints (one is "invalid mission data", 0xE0), so it starts where the aircraft hovers
             kept.insert(0, (*here, min(float(t.height or 0.0), kept[0][2] - MIN_WAYPOINT_SPACING)))
         return kept
+
+    async def read_go_home_altitude(self) -> float:
+        """0x01 0x41 GO_HOME_ALTITUDE (new firmware): the height the FC's go home climbs to."""
+        msg = await self.command("go_home_altitude_read", {})
+        f = msg.fields
+        if int(f["ack"]) != 0 or f["hash"] != cmds.GO_HOME_ALTITUDE_HASH:
+            raise DeviceRejected(ResultCode.BUSY, f"go-home altitude not read (ret code {f['ack']})")
+        return float(f["altitude"])
+
+    async def set_go_home_altitude(self, altitude: int) -> None:
+        await self._set_go_home_altitude(altitude)
 
     async def _set_go_home_altitude(self, altitude: int) -> None:
         """0x01 0x42 GO_HOME_ALTITUDE (new firmware): written, and the FC's echo must hold it."""

@@ -221,7 +221,7 @@ class FirmwareCodes:
 FIRMWARE_CODES: dict[str, FirmwareCodes] = {
     # A3/N3/M600/M210 (OSDK 3.x): flight status 0 stopped, 1 on ground, 2 in air
     "new": FirmwareCodes(
-        tasks={"takeoff": 1, "landing": 2, "go_home": 6, "exit_go_home": 12},
+        tasks={"takeoff": 1, "landing": 2, "go_home": 6, "exit_go_home": 12, "exit_landing": 14},
         task_ok=0,
         task_ack=FLIGHT_TASK_ACK,
         in_air=frozenset({2}),

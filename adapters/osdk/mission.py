@@ -297,6 +297,14 @@ class MissionHost(Protocol):
 
     async def flight_task(self, task: str) -> None: ...
 
+    @property
+    def fw(self) -> str:
+        """The firmware generation: ``new`` (``01 41``/``01 42`` go-home altitude) or ``m100``."""
+
+    async def set_go_home_altitude(self, altitude: int) -> None: ...
+
+    async def read_go_home_altitude(self) -> float: ...
+
     async def secure(self, what: str, task_id: str, reason: str) -> str | None:
         """A task failed after take-off: land or go home (adapters/osdk/limits.py after_failure)."""
 

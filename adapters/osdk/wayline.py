@@ -1,6 +1,6 @@
 """Flying a planned wayline route on an Onboard SDK aircraft: take-off when on the ground (like a dock),
 upload and start each chained ground-station mission, follow its reached / finished / error pushes,
-change the cruise speed per segment, pause / resume / cancel, and the gateway's own return home.
+change the cruise speed per segment, pause / resume / cancel, and return home (the FC's own go home).
 
 Owns the I/O half of a wayline on this family (the plan, sans-I/O, is ``wayline_plan.py``); uses the
 aircraft only through :class:`adapters.osdk.mission.MissionHost` (the command path ``ground_station``,
@@ -19,12 +19,11 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import math
 from collections.abc import Callable
 
 from adapters.errors import DeviceNotConnected, DeviceRejected, DeviceTimeout, MissionStopped
-from adapters.osdk.commands import GS_ACK_TEXT
-from adapters.osdk.mission import MissionHost, Task, distance_m
+from adapters.osdk.commands import GO_HOME_ALTITUDE_RANGE, GS_ACK_TEXT
+from adapters.osdk.mission import MissionHost, Task
 from adapters.osdk.wayline_plan import MISSION_MAX, FcMission, Plan, PlanOptions, plan_route
 from adapters.wayline.kmz import Route
 from adapters.wayline.runner import Reached
@@ -36,8 +35,6 @@ __all__ = ["MissionStopped", "OsdkWayline", "Reached"]
 
 AUTO_TAKEOFF = 11
 POLL = 0.05
-#: closer than this (m) to home, the gateway's two-waypoint way home cannot be flown: the FC's go home is
-MIN_HOME_DISTANCE = 2.0
 
 
 class OsdkWayline:
@@ -214,62 +211,49 @@ class OsdkWayline:
         FC was flying it."""
         return await self.adapter.stop_current_mission()
 
-    def return_home_plan(self, rth_altitude: float) -> list[tuple[float, float, float]] | None:
-        """The way home the gateway flies: up to ``rth_altitude`` over the aircraft, over home at that
-        height (then the FC lands): (latitude, longitude, height above take-off). None when the gateway
-        cannot build one: it does not know where home is (it has not seen this aircraft on the ground: a
-        restarted gateway), or home is too close for a two-waypoint mission (the FC refuses neighbours
-        closer than 0.5 m, 0xE5); the FC's own go home is flown then (:meth:`go_home`): it knows home."""
+    async def go_home_altitude(self, rth_altitude: float | None) -> float | None:
+        """The height the FC's go home will climb to (m above take-off), set first where the firmware can.
+        New firmware: ``rth_altitude`` (clamped to the FC's 20..500 m) is written with ``01 42``; without
+        one, the FC's own value is read (``01 41``: what the last take-off to point or task set). M100: the
+        protocol has neither (DJI Assistant 2 sets it): the ``go_home_altitude`` setting, or None."""
+        a = self.adapter
+        if a.fw != "new":
+            configured = a.settings.go_home_altitude
+            return None if configured is None else float(configured)
+        if rth_altitude is not None:
+            lo, hi = GO_HOME_ALTITUDE_RANGE
+            altitude = int(min(max(round(rth_altitude), lo), hi))
+            await a.set_go_home_altitude(altitude)
+            return float(altitude)
+        return await a.read_go_home_altitude()
+
+    def go_home_path(self, altitude: float | None) -> list[tuple[float, float, float]]:
+        """The way the FC's go home flies (what ``return_home_info`` plans): up to ``altitude`` over the
+        aircraft when it is lower, then over home at that height, where it lands: (latitude, longitude,
+        height above take-off). Empty when the gateway does not know home (a restarted gateway that has
+        not seen this aircraft on the ground): the FC knows it, the gateway cannot draw it."""
         t = self.adapter.telemetry
         home = self.adapter.home_position
         if home is None or t.latitude is None or t.longitude is None:
-            return None
-        here = (t.latitude, t.longitude)
-        h = max(rth_altitude, t.height or 0.0)
-        if distance_m(here, home) < MIN_HOME_DISTANCE:
-            return None
-        return [(here[0], here[1], h), (home[0], home[1], h)]
+            return []
+        h = max(altitude or 0.0, t.height or 0.0)
+        return [(t.latitude, t.longitude, h), (home[0], home[1], h)]
 
     async def go_home(self, flight_id: str) -> None:
         """The FC's own go home (``01 01`` task 6: it climbs to its go-home altitude, flies home and
-        lands), followed as a task of kind ``go_home`` (the FC's display mode says it runs)."""
+        lands; within 20 m of home DJI's FCs land where they are), followed as a task of kind ``go_home``
+        (the FC's display mode says it runs). Whatever task flies is stopped first (its end reported):
+        return home is the abort path of every task."""
         current = self.adapter.current_mission
         if current is not None and current.kind == "go_home" and current.live:
             return  # asked again while it goes home: the same go home (clouds resend)
         if current is not None and current.live:
-            await self.adapter.stop_current_mission()  # return home is the abort path of every task
+            await self.adapter.stop_current_mission()
         await self.adapter.flight_task("go_home")
         task = Task("go_home", flight_id, 0)
         self._task = task
         self.adapter.begin_mission(task)
         self.adapter.mission_started(task)
-
-    async def return_home(self, path: list[tuple[float, float, float]], speed: float, flight_id: str) -> None:
-        """Fly ``path`` as a mission that lands at its end (action_on_finish 2); returns once started.
-        Whatever task flies is stopped first: return home is the abort path of every task."""
-        a = self.adapter
-        if a.current_mission is not None and a.current_mission.live:
-            await a.stop_current_mission()
-        init = {
-            "length": len(path),
-            "vel_cmd_range": a.settings.mission_vel_cmd_range,
-            "idle_vel": min(speed, a.settings.mission_vel_cmd_range),
-            "action_on_finish": 2,
-            "mission_exec_num": 1,
-            "yaw_mode": 0,
-            "trace_mode": 0,
-            "action_on_rc_lost": 0,
-            "gimbal_pitch_mode": 0,
-        }
-        await a.ground_station("wp_init", init)
-        for i, (lat, lon, alt) in enumerate(path):
-            wp = {"index": i, "latitude": math.radians(lat), "longitude": math.radians(lon), "altitude": alt,
-                  "action_time_limit": 100}  # fmt: skip
-            await a.ground_station("wp_upload", wp)
-        task = Task("return_home", flight_id, len(path))
-        self._task = task
-        a.begin_mission(task)
-        await a.start_mission(task)
 
     async def secure(self, flight_id: str, reason: str) -> str | None:
         """The wayline failed after the aircraft took off for it (or while it flew it): never leave it where

@@ -26,10 +26,15 @@ Choices where WAYLINE-NOTES is silent (a DJI dock's behaviour where known):
   authority: live control (DRC) keeps its own rule (a grab first; docs/cloud-api.md). A pilot's RC that
   owns the aircraft refuses the obtain: the run fails with 319030 (return home answers 314000 with the
   FC's reason); a DRC session's sticks are refused (314000, naming the task) while the task flies.
-* ``return_home`` ends a running task ``canceled`` (break reason 1283 "user RTH") and flies the gateway's
-  own way home: up to the RTH height over the aircraft, over home at that height, land. The RTH height is
-  the last task's ``rth_altitude``, else its KMZ's ``globalRTHHeight``, else :data:`DEFAULT_RTH_ALTITUDE`.
-  ``return_home_cancel`` stops that mission: the aircraft hovers (as a dock's aircraft does, §3.5).
+* ``return_home`` is the abort path from every state in the air (issue #37): a running or paused task
+  ends ``canceled`` (break reason 1283 "user RTH"), a take-off or fly-to the adapter flies ends
+  ``wayline_cancel``, and the flight controller's own go home flies the aircraft home and lands it
+  (docs/osdk.md: why not a mission built by the gateway). Its height is set first where the firmware
+  can (``01 42``): the last task's ``rth_altitude``, else its KMZ's ``globalRTHHeight``, else the FC keeps
+  its own (what the last take-off to point set). ``return_home_info`` draws that way: up to the height
+  over the aircraft, over home (``last_point_type`` 0). On the ground it is refused (314000, "on the
+  ground") and nothing moves. ``return_home_cancel`` exits the go home (or its landing): the aircraft
+  hovers (as a dock's aircraft does, §3.5).
 * ``out_of_control_action`` 1 (hover) and 2 (land) are refused (325001): an Onboard SDK FC's lost-link
   failsafe is set in DJI Assistant 2, not by the open protocol; 0 (return home) is its default.
 * ``ready_conditions`` of a conditional task (``task_type`` 2) are checked every second: battery above
@@ -111,14 +116,12 @@ from schemas.wayline import (
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_RTH_ALTITUDE", "PREPARE_WAIT", "WaylineService"]
+__all__ = ["PREPARE_WAIT", "WaylineService"]
 
 PREPARE_WAIT = 2.0
 #: An immediate task is executed within 30 s of its execute_time (WAYLINE-NOTES §2 [FEAT]).
 IMMEDIATE_WINDOW_MS = 30_000
-DEFAULT_RTH_ALTITUDE = 100.0
 TAKEOFF_TIMEOUT = 30.0
-RTH_SPEED = 10.0
 PROGRESS_PERIOD = 1.0
 _UNOBTAINABLE = int(ResultCode.WAYLINE_FILE_UNOBTAINABLE)
 METHODS = frozenset(spec.method for spec in WAYLINE_METHODS if spec.kind is TopicKind.SERVICES)
@@ -163,7 +166,7 @@ class WaylineService:
         self._stops: set[asyncio.Task[None]] = set()  # time-out stops in flight
         self._rth: dict[str, Any] | None = None  # the way home being flown: path, flight_id
         self._flown: dict[str, _File] = {}  # the file each run flies (a fresh URL may replace the prepared)
-        self._last_rth_altitude = DEFAULT_RTH_ALTITUDE
+        self._rth_altitude: float | None = None  # the last task's, else the FC's own
         self.store = store if store is not None else StateStore(None)
         self._persisted: dict[str, tuple[Any, ...]] = {}  # flight_id -> what the store holds of it
         #: refuse a route with actions the aircraft cannot carry out (else they are skipped and listed)
@@ -367,23 +370,20 @@ class WaylineService:
 
     async def _return_home(self, aircraft: Any, data: ReturnHome) -> Result:
         if not aircraft.in_air:
-            return ResultCode.BUSY, {"reason": "the aircraft is on the ground"}
+            return ResultCode.BUSY, {"reason": "return home refused: the aircraft is on the ground"}
         task = self.book.active
         flight_id = ""
         if task is not None:
             flight_id = task.flight_id
             await self._stop_task(aircraft, task, "canceled", break_reason=1283)
         runner = aircraft.wayline
-        path = runner.return_home_plan(self._last_rth_altitude)
         try:
             await runner.ensure_control()  # a dock's own aircraft: no grab from the cloud first
-            if path is None:  # home unknown here or too close for a mission: the FC's own go home
-                await runner.go_home(flight_id or "return-home")
-            else:
-                await runner.return_home(path, RTH_SPEED, flight_id or "return-home")
+            altitude = await runner.go_home_altitude(self._rth_altitude)
+            await runner.go_home(flight_id)  # the FC's own: it ends whatever task flies first
         except (DeviceRejected, DeviceTimeout, DeviceNotConnected) as exc:
             return ResultCode.BUSY, {"reason": f"return home refused: {str(exc)[:200]}"}
-        path = path or []
+        path = runner.go_home_path(altitude)
         self._rth = {"path": path, "flight_id": flight_id, "home_altitude": aircraft.telemetry.home_altitude}
         self._emit_rth()
         return ResultCode.SUCCESS, None
@@ -408,7 +408,7 @@ class WaylineService:
     async def _run(self, aircraft: Any, task: WaylineTask) -> None:
         req = task.request
         if req.rth_altitude is not None:
-            self._last_rth_altitude = float(req.rth_altitude)
+            self._rth_altitude = float(req.rth_altitude)
         self.store.task_started(
             task.flight_id, aircraft.info.sn, req.model_dump(mode="json"), self.clock.time_ms()
         )
@@ -438,7 +438,7 @@ class WaylineService:
         self._emit(task)
         file = self._flown[task.flight_id] = await self._fresh_file(aircraft, task)
         if file.route.config.global_rth_height and req.rth_altitude is None:
-            self._last_rth_altitude = file.route.config.global_rth_height
+            self._rth_altitude = file.route.config.global_rth_height
         plan = self._plan(aircraft, file.route, req)
         for note in plan.skipped:
             log.warning("wayline task %s: skipped %s", task.flight_id, note)
