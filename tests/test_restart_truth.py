@@ -333,3 +333,41 @@ def test_killed_mid_fly_to_the_restart_continues_it_under_its_id(rig: Rig) -> No
     assert done[-1]["remaining_distance"] == 0
     last = _last_osd(rig)
     assert math.dist(target, (last["latitude"], last["longitude"])) < 1e-4  # ~10 m: at the target
+
+
+@pytest.mark.slow
+def test_killed_mid_return_home_the_restart_reports_it_and_can_cancel_it(rig: Rig) -> None:
+    """Issue #37's fault variant: the gateway dies while the FC flies its go home; the FC keeps returning,
+    and the restarted gateway reports it (mode_code 9 from the FC, not from a memory of its own), cancels
+    it on request (the aircraft hovers) and starts it again, down to a landing at home."""
+    rig.start_gateway()
+    rig.cloud.wait_for(f"{SN}/osd", lambda b: "latitude" in b["data"], timeout=20)
+    assert _service(rig, "flight_authority_grab", {})["data"]["result"] == 0
+    target = _ne(60.0, 0.0)
+    data = {"target_latitude": target[0], "target_longitude": target[1], "target_height": HOME_ALT + 20.0,
+            "security_takeoff_height": 20.0, "rth_altitude": 20, "max_speed": 10,
+            "flight_id": f"tk-{uuid.uuid4().hex[:8]}"}  # fmt: skip
+    assert _service(rig, "takeoff_to_point", data)["data"]["result"] == 0
+    wait_until(
+        lambda: rig.cloud.find("/events", lambda b: b.get("method") == "takeoff_to_point_progress"
+                               and b["data"]["status"] == "task_finish"),
+        60,
+        what="out at 60 m",
+    )  # fmt: skip
+    assert _service(rig, "return_home", None)["data"]["result"] == 0
+    _fresh_osd(rig, lambda d: d.get("mode_code") == 9 and d.get("horizontal_speed", 0) > 3.0, 15, "returning")
+    rig.kill_gateway()
+    time.sleep(1.0)  # nobody reports it; the FC flies home on its own
+    rig.cloud.clear()
+    rig.start_gateway()
+    _fresh_osd(rig, lambda d: d.get("mode_code") == 9, 10, "the restarted gateway reports the return")
+    assert _service(rig, "flight_authority_grab", {})["data"]["result"] == 0  # a new process's authority
+    r = _service(rig, "return_home_cancel", None)
+    assert r["data"]["result"] == 0, r["data"]
+    _fresh_osd(rig, lambda d: d.get("mode_code") != 9 and d.get("horizontal_speed", 99) < 0.5, 10, "hovering")
+    assert _service(rig, "return_home", None)["data"]["result"] == 0
+    _fresh_osd(rig, lambda d: d.get("mode_code") == 10, 40, "landing at home")
+    landed = _fresh_osd(
+        rig, lambda d: d.get("elevation", 99.0) < 0.2 and d.get("mode_code") == 0, 40, "landed"
+    )
+    assert math.dist(_ne(0, 0), (landed["latitude"], landed["longitude"])) * 111_000 < 2.0, landed

@@ -404,7 +404,7 @@ class AircraftAdapter(SupervisedAdapter):
         task = self.mission
         flying = True
         if task is not None and task.kind == "go_home" and task.live:
-            await self._exit_go_home()  # the FC hovers where it is
+            await self.exit_go_home()  # the FC hovers where it is
         else:
             try:
                 await self.ground_station("wp_start_stop", {"start": 1})
@@ -424,7 +424,7 @@ class AircraftAdapter(SupervisedAdapter):
                 self._progress(task, "wayline_cancel", task.reached - task.offset)
         return flying
 
-    async def _exit_go_home(self) -> None:
+    async def exit_go_home(self) -> None:
         """End the FC's go home in whichever phase it is: flying home (exit go home) or landing at home
         (exit landing; the new firmware's task 14). The display mode says which; it lags the FC by up to
         one push, so the other is tried when the first is refused."""

@@ -288,6 +288,9 @@ class MissionHost(Protocol):
     def mission_stopped(self) -> None:
         """The FC acknowledged a mission stop: it flies none from now (whatever its last push said)."""
 
+    async def exit_go_home(self) -> None:
+        """End the FC's go home in whichever phase it is (flying home or landing at home): it hovers."""
+
     @property
     def current_mission(self) -> Task | None: ...
 

@@ -23,7 +23,7 @@ from collections.abc import Callable
 
 from adapters.errors import DeviceNotConnected, DeviceRejected, DeviceTimeout, MissionStopped
 from adapters.osdk.commands import GO_HOME_ALTITUDE_RANGE, GS_ACK_TEXT
-from adapters.osdk.mission import MissionHost, Task
+from adapters.osdk.mission import DM_GO_HOME, MissionHost, Task
 from adapters.osdk.wayline_plan import MISSION_MAX, FcMission, Plan, PlanOptions, plan_route
 from adapters.wayline.kmz import Route
 from adapters.wayline.runner import Reached
@@ -208,8 +208,18 @@ class OsdkWayline:
     async def cancel(self) -> bool:
         """Stop the mission: the FC brakes and hovers where it is (the adapter's
         :meth:`stop_current_mission`; a FC that flies none has nothing left to stop). Returns whether the
-        FC was flying it."""
+        FC was flying it. The FC's own go home that no task of this process stands for (one started
+        before a restart: the display mode says it flies) is exited all the same: the device is the truth."""
+        current = self.adapter.current_mission
+        if (current is None or not current.live) and self.fc_going_home:
+            await self.adapter.exit_go_home()
+            return True
         return await self.adapter.stop_current_mission()
+
+    @property
+    def fc_going_home(self) -> bool:
+        """The FC flies its go home (display mode 15), whoever started it."""
+        return self.adapter.display_mode == DM_GO_HOME
 
     async def go_home_altitude(self, rth_altitude: float | None) -> float | None:
         """The height the FC's go home will climb to (m above take-off), set first where the firmware can.

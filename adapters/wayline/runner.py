@@ -32,6 +32,8 @@ class WaylineRunner(Protocol):
     """The ``wayline`` attribute of an adapter whose aircraft flies routes."""
 
     mission_running: bool
+    #: the device flies its own return home, whoever started it (e.g. a process before a restart)
+    fc_going_home: bool
 
     def plan(
         self,

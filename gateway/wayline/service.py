@@ -389,7 +389,9 @@ class WaylineService:
         return ResultCode.SUCCESS, None
 
     async def _return_home_cancel(self, aircraft: Any, data: ReturnHomeCancel) -> Result:
-        if self._rth is None or not aircraft.wayline.mission_running:
+        runner = aircraft.wayline
+        # the FC's word, not this process's memory: a go home started before a restart is cancelled too
+        if not (runner.mission_running or runner.fc_going_home):
             self._rth = None
             return ResultCode.BUSY, {"reason": "the aircraft is not returning home"}
         try:
