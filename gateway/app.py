@@ -181,6 +181,7 @@ class GatewayApp:
             wayline=wayline,
             on_requests_reply=requests.answer,
             cloud_control=cloud_control,
+            journal=store,  # replies outlive the process: a tid resent after a restart is not acted on again
         )
         self.drc.call_service = self.dispatcher.call_local  # drc_gimbal_reset runs as gimbal_reset
         for adapter in self.devices:

@@ -28,6 +28,13 @@ Theory of operation. :class:`gateway.mqtt.MqttBridge` owns the sockets and paho;
   been retransmitted repeatedly (TCP's own view, ``TCP_INFO``). It then probes; when a node answers
   while the old connection is still stuck (TCP would wait out its grown retransmission timer, up to
   two minutes), the bridge drops it and connects at once.
+* **Deaf connection** (:class:`LivenessProbe`): connected and subscribed is not proof of receiving (a
+  NATS cluster electing its JetStream leader acknowledged a subscription and delivered nothing for 30 s).
+  After every SUBACK, and then every ``interval`` (jittered to ½–1×) while the link is proven, the bridge
+  publishes a probe to a topic the link is subscribed to; it must come back within ``timeout``. The first
+  miss marks the link *deaf* and resubscribes; a second miss on the same connection drops it
+  (:attr:`Loss.DEAF`) and the policy connects again at once (after a jitter up to ``reconnect_min``), the
+  next node first. The link stays deaf, whatever node it is on, until a probe comes back.
 
 Knows nothing of paho, sockets or topics.
 """
@@ -44,8 +51,11 @@ __all__ = [
     "STABLE_AFTER",
     "TAKEOVER_FIRST",
     "TAKEOVER_STREAK",
+    "Liveness",
+    "LivenessProbe",
     "Loss",
     "OfflineBuffer",
+    "ProbeStep",
     "ReconnectPolicy",
 ]
 
@@ -65,6 +75,7 @@ class Loss(Enum):
     CLOSED = "closed"  # the broker closed it (or the network reset it)
     TAKEN_OVER = "taken_over"  # MQTT 5 DISCONNECT with reason 0x8E
     STALLED = "stalled"  # we dropped it: the path was stuck while a node answered probes
+    DEAF = "deaf"  # we dropped it: subscribed, yet our own probe never came back (twice)
 
 
 class ReconnectPolicy:
@@ -134,6 +145,9 @@ class ReconnectPolicy:
         if how is Loss.STALLED:
             self._short_streak = 0
             return now  # a node answered a probe a moment ago: connect at once
+        if how is Loss.DEAF:  # the broker is up but does not deliver: the next node, soon (a fleet spread)
+            self._short_streak = 0
+            return now + self._rng.uniform(0.0, self.reconnect_min)
         if lasted < SHORT_LIVED:
             self._short_streak += 1
             if self.takeover_suspected or self._short_streak >= TAKEOVER_STREAK:
@@ -150,6 +164,99 @@ class ReconnectPolicy:
         self._takeovers += 1
         ceiling = min(self.takeover_backoff_max, TAKEOVER_FIRST * 2.0 ** min(self._takeovers - 1, 32))
         return now + self._rng.uniform(ceiling / 2, ceiling)
+
+
+class Liveness(Enum):
+    """Whether the link has been seen to receive."""
+
+    UNPROVEN = "unproven"  # connected, no probe back yet (and never deaf since the last proof)
+    LIVE = "live"  # the last probe came back in time
+    DEAF = "deaf"  # a probe missed its deadline; no probe has come back since
+
+
+class ProbeStep(Enum):
+    """What the bridge must do now for the liveness probe."""
+
+    NONE = "none"
+    SEND = "send"  # publish the probe :attr:`LivenessProbe.nonce` to the probe topic
+    RESUBSCRIBE = "resubscribe"  # first miss on this connection: subscribe again
+    RECONNECT = "reconnect"  # missed again after resubscribing: drop the connection (Loss.DEAF)
+
+
+class LivenessProbe:
+    """The end-to-end receive check of one broker link (see the module docstring, "Deaf connection").
+
+    The bridge calls :meth:`subscribed` on every SUBACK, :meth:`received` with every probe payload that
+    comes back, :meth:`lost` when the connection ends and :meth:`step` periodically (every 50 ms); ``now``
+    is always the injected clock's value. ``interval`` 0 turns it off (:meth:`step` never asks anything).
+    """
+
+    def __init__(self, *, interval: float, timeout: float, rng: random.Random | None = None) -> None:
+        self.interval, self.timeout = interval, timeout
+        self.enabled = interval > 0
+        self._rng = rng or random.Random()
+        self.state = Liveness.UNPROVEN
+        self.nonce = ""
+        self._seq = 0
+        self._token = f"{self._rng.getrandbits(48):012x}"  # tells our probes from another process's
+        self._due: float | None = None  # when the next probe goes out (None: not subscribed)
+        self._deadline: float | None = None  # when the outstanding probe must be back
+        self._sent_at = 0.0
+        self._missed = False  # a probe already missed on this connection (we resubscribed)
+        self.deaf_count = 0  # transitions into DEAF (for the metric)
+        self.last_rtt: float | None = None
+
+    @property
+    def deaf(self) -> bool:
+        return self.state is Liveness.DEAF
+
+    def subscribed(self, now: float) -> None:
+        """The broker acknowledged the subscriptions (after a connect or a resubscribe): probe now."""
+        self._due, self._deadline = now, None
+
+    def lost(self) -> None:
+        """The connection ended: nothing outstanding; a deaf link stays deaf until a probe comes back."""
+        self._due = self._deadline = None
+        self._missed = False
+
+    def step(self, now: float) -> ProbeStep:
+        if not self.enabled:
+            return ProbeStep.NONE
+        if self._deadline is not None:
+            if now < self._deadline:
+                return ProbeStep.NONE
+            self._deadline = None
+            if not self.deaf:
+                self.state = Liveness.DEAF
+                self.deaf_count += 1
+            if not self._missed:
+                self._missed = True
+                # the next probe goes out on its SUBACK, or after ``timeout`` if that SUBACK is missed
+                self._due = now + self.timeout
+                return ProbeStep.RESUBSCRIBE
+            return ProbeStep.RECONNECT
+        if self._due is not None and now >= self._due:
+            self._seq += 1
+            self.nonce = f"djigw-probe {self._token} {self._seq}"
+            self._due, self._deadline, self._sent_at = None, now + self.timeout, now
+            return ProbeStep.SEND
+        return ProbeStep.NONE
+
+    def received(self, now: float, payload: bytes) -> bool:
+        """A message on the probe topic: True when it is the outstanding probe (the link receives).
+        A late probe from before, or another process's, is ignored."""
+        if self._deadline is None or payload != self.nonce.encode():
+            return False
+        self.last_rtt = now - self._sent_at
+        self.state = Liveness.LIVE
+        self._missed = False
+        self._deadline = None
+        self._due = now + self._rng.uniform(self.interval / 2, self.interval)
+        return True
+
+    def next_at(self) -> float | None:
+        """When :meth:`step` next has something to do (a probe due or a deadline), if anything."""
+        return self._deadline if self._deadline is not None else self._due
 
 
 @dataclass(slots=True)

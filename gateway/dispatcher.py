@@ -117,6 +117,15 @@ class WaylineCalls(Protocol):
     async def call(self, method: str, data: Any) -> tuple[int, dict[str, Any] | None]: ...
 
 
+class ReplyJournal(Protocol):
+    """Where replies outlive the process (:class:`gateway.store.StateStore`): a request resent with the
+    same tid after a restart is answered from here, not acted on again."""
+
+    def reply_recorded(self, tid: str, payload: bytes) -> None: ...
+
+    def recorded_reply(self, tid: str, max_age_ms: int) -> bytes | None: ...
+
+
 @dataclass
 class _Cached:
     expires: float
@@ -141,8 +150,11 @@ class Dispatcher:
         wayline: WaylineCalls | None = None,
         on_requests_reply: Callable[[Any], None] | None = None,
         cloud_control: CloudControlCalls | None = None,
+        journal: ReplyJournal | None = None,
     ) -> None:
         self.gateway_sn = gateway_sn
+        #: replies kept across restarts (written before they are published); None: in memory only
+        self.journal = journal
         self.registry = registry
         self.devices = devices
         self.outbox = outbox
@@ -295,6 +307,14 @@ class Dispatcher:
                 cached.waiters.append(fut)
                 self._publish_reply(await fut, None, reply_to)
             return
+        if self.journal is not None:  # answered by an earlier process (it acted, maybe died before replying)
+            stored = self.journal.recorded_reply(tid, int(self.settings.reply_cache_seconds * 1000))
+            if stored is not None:
+                self.metrics.inc("services_duplicates_total")
+                log.info("%s tid %s: answered from the reply journal (acted on before a restart)",
+                         request.method, tid)  # fmt: skip
+                self._publish_reply(stored, self._cache_open(tid), reply_to)
+                return
         entry = self._cache_open(tid)
 
         started = self.clock.monotonic()
@@ -318,6 +338,12 @@ class Dispatcher:
             source = "mqtt" if reply_to is None else "console"
             audit("service", method=request.method, tid=tid, bid=request.bid, source=source,
                   result=int(result), device=device)  # fmt: skip
+        if self.journal is not None:  # before publishing: a crash after this point still knows it acted
+            try:
+                self.journal.reply_recorded(tid, raw)
+            except Exception:  # a full disk must not cost the reply
+                self.metrics.inc("handler_exceptions_total", where="reply_journal")
+                log.exception("could not keep the reply to %s in the state store", tid)
         self._publish_reply(raw, entry, reply_to)
 
     async def _execute(self, request: Any) -> tuple[int, dict[str, Any] | None]:

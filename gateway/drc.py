@@ -509,6 +509,8 @@ class DrcController:
             reconnect_max=main.reconnect_max,
             stall_timeout=main.for_live_control(self.settings.drc.heartbeat_timeout).stall_timeout,
             session_expiry=0,
+            liveness_interval=main.liveness_interval,
+            liveness_timeout=main.liveness_timeout,
         )
         bridge = self._link_factory(
             settings,

@@ -10,7 +10,9 @@ Threads: one *supervisor* per bridge (``mqtt-<name>``) finds a broker node and c
 to every ``broker.url``, then paho's ``connect``), starts paho's network thread for that one
 connection, watches it (a connection whose data TCP keeps retransmitting is *stalled*: it is dropped
 as soon as a probe finds a node answering, or after ``broker.stall_timeout``, and the osd written to it
-after its last ACK goes back into the buffer) and, when it ends, asks
+after its last ACK goes back into the buffer; a connection that does not *receive*, its own probe not
+coming back, is *deaf*: resubscribed, then dropped, see :class:`gateway.broker_link.LivenessProbe`) and,
+when it ends, asks
 :class:`gateway.broker_link.ReconnectPolicy` when and where to go next. paho's own
 reconnect is off: the policy decides (failover across nodes, probing, backoff, client-id takeover).
 QoS 1 messages published meanwhile wait in paho's queue and go out after the next CONNACK, on
@@ -49,14 +51,14 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from gateway import pahocompat
-from gateway.broker_link import Loss, OfflineBuffer, ReconnectPolicy
+from gateway.broker_link import LivenessProbe, Loss, OfflineBuffer, ProbeStep, ReconnectPolicy
 from gateway.clock import SYSTEM_CLOCK, Clock
 from gateway.metrics import Metrics
 from gateway.settings import BrokerEndpoint, BrokerSettings
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Inbound", "MqttBridge", "close_client", "tcp_last_ack_age", "tcp_stalled"]
+__all__ = ["Inbound", "MqttBridge", "close_client", "probe_topic_for", "tcp_last_ack_age", "tcp_stalled"]
 
 #: How long sent osd is remembered, to be sent again if its connection turns out to have been dead.
 RECENT_WINDOW = 10.0
@@ -72,6 +74,13 @@ class Inbound:
     topic: str
     payload: bytes
     oversize: bool = False
+
+
+def probe_topic_for(client_id: str) -> str:
+    """The topic a link's liveness probe travels on: private to the client id (wildcards and levels
+    in the id are flattened, so it is one plain topic)."""
+    safe = "".join("_" if c in "+#/" else c for c in client_id) or "_"
+    return f"djigw/{safe}/probe"
 
 
 def close_client(client: paho.Client) -> None:
@@ -224,6 +233,7 @@ class MqttBridge:
         buffered: Callable[[str], bool] | None = None,
         clock: Clock = SYSTEM_CLOCK,
         rng: random.Random | None = None,
+        probe_topic: str | None = None,
     ) -> None:
         self.settings = settings
         self.client_id = client_id
@@ -255,6 +265,17 @@ class MqttBridge:
             rng=rng,
         )
         self._buffer = OfflineBuffer(settings.telemetry_buffer, settings.telemetry_buffer_age)
+        # the end-to-end receive check: the probe rides the subscriptions' own QoS (a QoS 1 probe crosses
+        # the broker's persistent-session path, e.g. JetStream on NATS, as requests do); no subscriptions:
+        # nothing to be deaf to
+        self.probe_topic = probe_topic or probe_topic_for(client_id)
+        self._probe_qos = max((q for _, q in self.subscriptions), default=0)
+        self.liveness = LivenessProbe(
+            interval=settings.liveness_interval if self.subscriptions else 0.0,
+            timeout=settings.liveness_timeout,
+            rng=rng,
+        )
+        self._probe_lock = threading.Lock()  # the supervisor steps it, the network thread answers it
         self._buffer_lock = threading.Lock()
         # paho writes a byte to its wake-up socket pair on every publish and disconnect, from the caller's
         # thread; the supervisor closes that pair after each connection (pahocompat.release_sockets). This
@@ -337,6 +358,11 @@ class MqttBridge:
     @property
     def connected(self) -> bool:
         return self._client.is_connected()
+
+    @property
+    def deaf(self) -> bool:
+        """A liveness probe missed its deadline and none has come back since (on this node or another)."""
+        return self.liveness.deaf
 
     @property
     def takeover_suspected(self) -> bool:
@@ -649,6 +675,8 @@ class MqttBridge:
                     self._abort()
                     self._wait_done()
                     return
+                if self._probe_step(ep, now):
+                    return
                 if prober is not None:
                     if now >= next_round:
                         prober.launch(now)
@@ -664,6 +692,49 @@ class MqttBridge:
         finally:
             if prober is not None:
                 prober.close()
+
+    # -- liveness (supervisor thread steps it, network thread answers it) --------------------------
+    def _subscription_list(self) -> list[tuple[str, int]]:
+        subs = list(self.subscriptions)
+        if self.liveness.enabled:
+            subs.append((self.probe_topic, self._probe_qos))
+        return subs
+
+    def _probe_step(self, ep: BrokerEndpoint, now: float) -> bool:
+        """Advance the liveness probe; True when it gave the connection up (deaf twice)."""
+        with self._probe_lock:
+            was_deaf = self.liveness.deaf
+            step = self.liveness.step(now)
+            nonce = self.liveness.nonce
+        if step is ProbeStep.NONE:
+            return False
+        if step is ProbeStep.SEND:
+            self._paho_publish(self.probe_topic, nonce.encode(), self._probe_qos)
+            return False
+        if not was_deaf:
+            self._metrics.inc("mqtt_deaf_total", link=self._name)
+            self._metrics.set("mqtt_deaf", 1, link=self._name)
+        if step is ProbeStep.RESUBSCRIBE:
+            log.warning("broker %s (%s): deaf: our probe did not come back within %.1f s; resubscribing",
+                        ep.where(), self._name, self.settings.liveness_timeout)  # fmt: skip
+            self._metrics.inc("mqtt_resubscribes_total", link=self._name)
+            with self._wake_lock:
+                _, self._sub_mid = self._client.subscribe(self._subscription_list())
+            return False
+        log.warning("broker %s (%s): still deaf after resubscribing; reconnecting (next node first)",
+                    ep.where(), self._name)  # fmt: skip
+        self._loss = Loss.DEAF
+        self._abort()
+        self._wait_done()
+        return True
+
+    def _probe_back(self, payload: bytes) -> None:
+        with self._probe_lock:
+            was_deaf = self.liveness.deaf
+            ours = self.liveness.received(self._clock(), payload)
+        if ours and was_deaf:
+            self._metrics.set("mqtt_deaf", 0, link=self._name)
+            log.info("broker %s (%s): receives again (probe back)", self._where(), self._name)
 
     def _requeue_unacked(self) -> None:
         """The stalled connection is given up: the buffered-topic messages written to it after its last
@@ -736,7 +807,7 @@ class MqttBridge:
             self._failing_since = None
         self._subscribed.clear()
         if self.subscriptions:
-            _, self._sub_mid = client.subscribe(list(self.subscriptions))
+            _, self._sub_mid = client.subscribe(self._subscription_list())
         self._metrics.inc("mqtt_connects_total", link=self._name)
         self._metrics.set("mqtt_connected", 1, link=self._name)
         if not self.policy.takeover_suspected:
@@ -765,6 +836,19 @@ class MqttBridge:
         if refused:
             self._metrics.inc("mqtt_subscribe_refused_total", link=self._name)
             log.error("broker %s refused %d subscription(s): %s", self._where(), len(refused), refused[0])
+        with self._probe_lock:
+            if self.liveness.enabled and len(reasons) > len(self.subscriptions):
+                if getattr(reasons[-1], "is_failure", False):  # the probe topic: no proof possible here
+                    self.liveness.enabled = False
+                    log.warning(
+                        "broker %s (%s) refused the probe topic %s: liveness checks off for this link "
+                        "(allow it in the ACL)",
+                        self._where(),
+                        self._name,
+                        self.probe_topic,
+                    )
+                else:
+                    self.liveness.subscribed(self._clock())
         self._subscribed.set()
 
     @property
@@ -781,10 +865,12 @@ class MqttBridge:
         props: Properties | None,
     ) -> None:
         self._subscribed.clear()
+        with self._probe_lock:
+            self.liveness.lost()
         self._metrics.set("mqtt_connected", 0, link=self._name)
         if getattr(reason, "value", None) == SESSION_TAKEN_OVER:
             self._loss = Loss.TAKEN_OVER
-        elif self._aborting and self._loss is not Loss.STALLED:
+        elif self._aborting and self._loss not in (Loss.STALLED, Loss.DEAF):
             self._loss = Loss.CLOSED
         if reason.is_failure and self._session_live:
             self._metrics.inc("mqtt_disconnects_total", link=self._name)
@@ -798,6 +884,9 @@ class MqttBridge:
         self._done.set()
 
     def _on_message(self, client: paho.Client, userdata: Any, msg: paho.MQTTMessage) -> None:
+        if msg.topic == self.probe_topic:
+            self._probe_back(bytes(msg.payload))
+            return
         if self.inline is not None:
             try:
                 if self.inline(msg.topic, bytes(msg.payload)):  # paho's payload is bytes: not copied

@@ -66,6 +66,9 @@ HELP: dict[str, str] = {
     "mqtt_takeovers_total": "Connections taken over by another client with our client id, by link",
     "mqtt_client_id_conflict": "1 while another client seems to use our client id (see the ERROR log)",
     "mqtt_stalls_total": "Connections whose data TCP kept retransmitting (path down), by link",
+    "mqtt_deaf_total": "Links found deaf (subscribed, but the liveness probe did not come back), by link",
+    "mqtt_deaf": "1 while a link is deaf (its liveness probe has not come back), by link",
+    "mqtt_resubscribes_total": "Subscriptions made again because a liveness probe did not come back, by link",
     "telemetry_buffered": "osd messages held while the broker is unreachable, by link",
     "telemetry_dropped_total": "Buffered osd dropped (the oldest first), by reason: overflow or age",
     "telemetry_delivered_late_total": "Buffered osd delivered after the broker came back, by link",
@@ -250,6 +253,9 @@ class Observability:
                 "inbound_queue": bridge.queue.qsize() if bridge is not None else 0,
                 "node": safe_url(bridge.current.url) if bridge is not None and bridge.current else None,
                 "stalled": bool(bridge is not None and bridge.stalled),
+                # connected (maybe) but our own probe did not come back: the link does not receive
+                "deaf": bool(bridge is not None and getattr(bridge, "deaf", False)),
+                "drc_link_deaf": self._drc_link_deaf(),
                 "telemetry_buffered": bridge.buffered if bridge is not None else 0,
                 # another client uses our client id (MQTT 5 0x8E, or 3.1.1 immediate disconnects)
                 "client_id_conflict": bool(bridge is not None and bridge.takeover_suspected),
@@ -264,6 +270,11 @@ class Observability:
             "gauges": [(n, dict(lab), v) for (n, lab), v in gauges],
             "histograms": histograms,
         }
+
+    def _drc_link_deaf(self) -> bool:
+        drc: DrcController | None = getattr(self.app, "drc", None)
+        link = drc.dedicated_link if drc is not None else None
+        return bool(link is not None and getattr(link, "deaf", False))
 
     def _drc(self) -> dict[str, Any]:
         drc: DrcController | None = getattr(self.app, "drc", None)
@@ -300,15 +311,27 @@ class Observability:
 
     @staticmethod
     def health(snap: dict[str, Any]) -> tuple[bool, dict[str, bool]]:
-        """Healthy: started, the loop answers, the broker connection is up. Offline devices do not
-        count (absent hardware is not a fault of the gateway; restarting it would not help)."""
+        """Healthy: started, the loop answers, the broker connection is up and receives (its liveness
+        probe comes back; a DRC session's own link too). Offline devices do not count (absent hardware
+        is not a fault of the gateway; restarting it would not help)."""
         checks = {
             "started": bool(snap["started"]),
             "event_loop": bool(snap["loop_responsive"]),
             "broker": bool(snap["broker"]["connected"]),
+            "broker_receives": not snap["broker"].get("deaf", False),
+            "drc_broker_receives": not snap["broker"].get("drc_link_deaf", False),
             "client_id_unique": not snap["broker"].get("client_id_conflict", False),
         }
         return all(checks.values()), checks
+
+    @staticmethod
+    def broker_state(snap: dict[str, Any]) -> str:
+        """One word for the main broker link: ``disconnected``, ``deaf`` (connected or not, its probe has
+        not come back since it missed) or ``connected``."""
+        broker = snap["broker"]
+        if broker.get("deaf", False):
+            return "deaf"
+        return "connected" if broker["connected"] else "disconnected"
 
     def families(self, snap: dict[str, Any] | None = None) -> Iterator[Metric]:
         snap = snap or self.snapshot()

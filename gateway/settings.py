@@ -132,6 +132,21 @@ class BrokerSettings(BaseModel):
         description="a connection whose data TCP keeps retransmitting this long (s) is given up and remade "
         "(live control riding it ends); at most ⅔ of drc.heartbeat_timeout is used",
     )
+    liveness_interval: float = Field(
+        5.0,
+        ge=0,
+        le=3600,
+        description="prove the link receives: after every SUBACK and then this often (s, jittered ½–1×) "
+        "a probe is published to a topic the link subscribes to (djigw/<client id>/probe); 0: off "
+        "(a broker whose ACL silently drops the probe needs it allowed, or this off)",
+    )
+    liveness_timeout: float = Field(
+        3.0,
+        gt=0,
+        le=60,
+        description="a probe not back within this (s) marks the link deaf: resubscribe, then reconnect "
+        "(next url)",
+    )
     takeover_backoff_max: float = Field(
         120.0,
         ge=30,

@@ -2,7 +2,14 @@
 restarted gateway reports the mission the aircraft still flies under the same ``flight_id``).
 
 Besides the wayline tasks it is the devices' :class:`adapters.base.TaskJournal` (the fly-to or take-off
-to point a device started, so it continues under the same id after a restart).
+to point a device started, so it continues under the same id after a restart) and the dispatcher's
+reply journal (``tid`` → the reply, bounded by count and age): a request resent with the same ``tid``
+after a restart is answered from here and not acted on again. The reply is written before it is
+published, so a process killed between acting and replying still knows it acted.
+
+A damaged database file (not a database, a corrupt page) is set aside, renamed
+``<name>.damaged-<unix ms>`` with its WAL, with an ERROR log line, and a fresh store is made: never a
+crash at start.
 
 Owns one SQLite database (the standard library's ``sqlite3``) in the configured state directory
 (``state_dir``; ``dji-gateway run --simulate`` without one uses a temporary directory, and no directory at
@@ -28,7 +35,10 @@ from typing import Any
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DB_NAME", "StateStore", "StoredTask"]
+__all__ = ["DB_NAME", "REPLIES_KEPT", "StateStore", "StoredTask"]
+
+#: At most this many replies are kept (the oldest go first), as in the dispatcher's memory cache.
+REPLIES_KEPT = 10_000
 
 DB_NAME = "dji-gateway.sqlite3"
 SCHEMA_VERSION = 1
@@ -54,6 +64,12 @@ CREATE TABLE IF NOT EXISTS device_tasks (
     data TEXT NOT NULL,             -- what continuing it needs, as JSON
     updated_ms INTEGER NOT NULL
 );
+CREATE TABLE IF NOT EXISTS replies (
+    tid TEXT PRIMARY KEY,           -- the request's tid
+    payload BLOB NOT NULL,          -- the services_reply exactly as published
+    stored_ms INTEGER NOT NULL
+);
+CREATE INDEX IF NOT EXISTS replies_by_age ON replies (stored_ms);
 """
 
 
@@ -79,20 +95,43 @@ class StateStore:
     def __init__(self, directory: Path | None, *, now_ms: Callable[[], int] | None = None) -> None:
         self.path: Path | None = None
         self._now_ms = now_ms or (lambda: int(time.time() * 1000))
+        self.set_aside: Path | None = None  # where a damaged file went, if one was found at start
+        self._replies_written = 0
         if directory is None:
-            target = ":memory:"
-        else:
-            directory.mkdir(parents=True, exist_ok=True)
-            self.path = directory / DB_NAME
-            target = str(self.path)
-        self._db = sqlite3.connect(target, isolation_level=None, check_same_thread=False)
-        self._db.execute("PRAGMA journal_mode=WAL")
-        self._db.execute("PRAGMA synchronous=FULL")
-        self._db.executescript(_SCHEMA)  # idempotent; executescript commits on its own
-        with self._tx():
-            self._db.execute(
+            self._db = self._open(":memory:")
+            return
+        directory.mkdir(parents=True, exist_ok=True)
+        self.path = directory / DB_NAME
+        try:
+            self._db = self._open(str(self.path))
+        except sqlite3.DatabaseError as exc:  # not a database, or a corrupt page: keep it for a post-mortem
+            self.set_aside = self.path.with_name(f"{DB_NAME}.damaged-{self._now_ms()}")
+            for suffix in ("", "-wal", "-shm"):
+                part = Path(f"{self.path}{suffix}")
+                if part.exists():
+                    part.rename(Path(f"{self.set_aside}{suffix}"))
+            log.error("state store %s is damaged (%s): set aside as %s; starting with an empty store",
+                      self.path, exc, self.set_aside)  # fmt: skip
+            self._db = self._open(str(self.path))
+
+    def _open(self, target: str) -> sqlite3.Connection:
+        db = sqlite3.connect(target, isolation_level=None, check_same_thread=False)
+        try:
+            db.execute("PRAGMA journal_mode=WAL")
+            db.execute("PRAGMA synchronous=FULL")
+            (check,) = db.execute("PRAGMA quick_check").fetchone()
+            if check != "ok":
+                raise sqlite3.DatabaseError(f"quick_check: {check}")
+            db.executescript(_SCHEMA)  # idempotent; executescript commits on its own
+            db.execute("BEGIN IMMEDIATE")
+            db.execute(
                 "INSERT OR IGNORE INTO meta (key, value) VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),)
             )
+            db.execute("COMMIT")
+        except sqlite3.DatabaseError:
+            db.close()
+            raise
+        return db
 
     def _tx(self) -> _Transaction:
         return _Transaction(self._db)
@@ -164,6 +203,41 @@ class StateStore:
         with self._tx():
             cur = self._db.execute("DELETE FROM tasks WHERE live=0 AND updated_ms < ?", (cutoff_ms,))
         return cur.rowcount
+
+    # -- replies (the dispatcher's reply journal) -----------------------------------------------------
+    def reply_recorded(self, tid: str, payload: bytes) -> None:
+        """Keep the reply to ``tid`` (one INSERT, its own transaction); now and then the oldest beyond
+        :data:`REPLIES_KEPT` go."""
+        self._db.execute(
+            "INSERT OR REPLACE INTO replies (tid, payload, stored_ms) VALUES (?, ?, ?)",
+            (tid, payload, self._now_ms()),
+        )
+        self._replies_written += 1
+        if self._replies_written % 1000 == 0:
+            self.replies_pruned(REPLIES_KEPT)
+
+    def recorded_reply(self, tid: str, max_age_ms: int) -> bytes | None:
+        """The reply kept for ``tid`` if it is at most ``max_age_ms`` old."""
+        row = self._db.execute(
+            "SELECT payload FROM replies WHERE tid=? AND stored_ms >= ?", (tid, self._now_ms() - max_age_ms)
+        ).fetchone()
+        return None if row is None else bytes(row[0])
+
+    def replies_pruned(self, keep: int, max_age_ms: int | None = None) -> int:
+        """Drop replies beyond the newest ``keep`` (and older than ``max_age_ms``); how many went."""
+        with self._tx():
+            cur = self._db.execute(
+                "DELETE FROM replies WHERE tid NOT IN "
+                "(SELECT tid FROM replies ORDER BY stored_ms DESC LIMIT ?)",
+                (keep,),
+            )
+            gone = cur.rowcount
+            if max_age_ms is not None:
+                cur = self._db.execute(
+                    "DELETE FROM replies WHERE stored_ms < ?", (self._now_ms() - max_age_ms,)
+                )
+                gone += cur.rowcount
+        return gone
 
     def close(self) -> None:
         self._db.close()

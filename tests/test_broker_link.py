@@ -13,8 +13,11 @@ from gateway.broker_link import (
     SHORT_LIVED,
     STABLE_AFTER,
     TAKEOVER_STREAK,
+    Liveness,
+    LivenessProbe,
     Loss,
     OfflineBuffer,
+    ProbeStep,
     ReconnectPolicy,
 )
 
@@ -148,3 +151,109 @@ def test_the_policy_module_is_sans_io() -> None:
     assert all(
         n.split(".")[0] in {"__future__", "random", "collections", "dataclasses", "enum"} for n in names
     )
+
+
+# ------------------------------------------------------------------------------------------ liveness
+def probe(interval: float = 5.0, timeout: float = 3.0, seed: int = 1) -> LivenessProbe:
+    return LivenessProbe(interval=interval, timeout=timeout, rng=random.Random(seed))
+
+
+def test_a_probe_goes_out_on_every_suback_and_then_every_interval_while_it_comes_back() -> None:
+    p = probe()
+    assert p.step(0.0) is ProbeStep.NONE  # not subscribed yet: nothing to prove
+    p.subscribed(10.0)
+    assert p.step(10.0) is ProbeStep.SEND
+    first = p.nonce
+    assert p.step(10.5) is ProbeStep.NONE  # outstanding, deadline not reached
+    assert p.received(10.02, first.encode())
+    assert p.state is Liveness.LIVE and p.last_rtt == pytest.approx(0.02)
+    due = p.next_at()
+    assert due is not None and 10.02 + 2.5 <= due <= 10.02 + 5.0  # jittered ½–1× interval
+    assert p.step(due - 0.01) is ProbeStep.NONE
+    assert p.step(due) is ProbeStep.SEND
+    assert p.nonce != first  # a new nonce each time: a late copy of the old one proves nothing
+    assert not p.received(due + 0.01, first.encode())
+    assert p.received(due + 0.01, p.nonce.encode())
+
+
+def test_a_missed_probe_makes_the_link_deaf_resubscribes_then_reconnects() -> None:
+    p = probe(timeout=3.0)
+    p.subscribed(0.0)
+    assert p.step(0.0) is ProbeStep.SEND
+    assert p.step(2.99) is ProbeStep.NONE and p.state is Liveness.UNPROVEN
+    assert p.step(3.0) is ProbeStep.RESUBSCRIBE
+    assert p.deaf and p.deaf_count == 1
+    p.subscribed(3.1)  # the SUBACK of the resubscription
+    assert p.step(3.1) is ProbeStep.SEND
+    assert p.step(6.1) is ProbeStep.RECONNECT
+    assert p.deaf_count == 1  # still the same deafness: counted once
+    p.lost()
+    assert p.step(100.0) is ProbeStep.NONE  # no connection: nothing to send
+    assert p.deaf  # deaf until a probe comes back, whatever node the link is on now
+    p.subscribed(100.5)  # connected again (the next node) and subscribed
+    assert p.step(100.5) is ProbeStep.SEND
+    assert p.received(100.51, p.nonce.encode())
+    assert p.state is Liveness.LIVE and not p.deaf
+
+
+def test_deafness_is_detected_and_acted_on_within_two_timeouts_of_the_suback() -> None:
+    """The issue's bound: a link deaf from its SUBACK is given up 2 × timeout later; one deaf in the
+    middle of a connection at most interval + 2 × timeout later (5 + 2 × 3 = 11 s < 15 s by default)."""
+    for seed in range(50):
+        p = probe(seed=seed)
+        p.subscribed(0.0)
+        t, steps = 0.0, []
+        while t < 20.0:
+            step = p.step(t)
+            if step is ProbeStep.RESUBSCRIBE:
+                p.subscribed(t + 0.01)
+            if step is not ProbeStep.NONE:
+                steps.append((round(t, 2), step))
+            if step is ProbeStep.RECONNECT:
+                break
+            t += 0.05
+        assert steps[-1][1] is ProbeStep.RECONNECT and steps[-1][0] <= 2 * 3.0 + 0.2
+        # healthy for a while, then deaf: the reconnect comes within interval + 2 × timeout
+        p = probe(seed=seed)
+        p.subscribed(0.0)
+        t = 0.0
+        deaf_from = 30.0
+        while True:
+            step = p.step(t)
+            if step is ProbeStep.SEND and t < deaf_from:
+                assert p.received(t + 0.01, p.nonce.encode())
+            elif step is ProbeStep.RESUBSCRIBE:
+                p.subscribed(t + 0.01)
+            elif step is ProbeStep.RECONNECT:
+                break
+            t = round(t + 0.05, 2)
+        assert deaf_from < t <= deaf_from + 5.0 + 2 * 3.0 + 0.2
+
+
+def test_a_lost_suback_after_resubscribing_still_leads_to_the_next_probe() -> None:
+    p = probe(timeout=1.0)
+    p.subscribed(0.0)
+    assert p.step(0.0) is ProbeStep.SEND
+    assert p.step(1.0) is ProbeStep.RESUBSCRIBE
+    assert p.step(1.5) is ProbeStep.NONE
+    assert p.step(2.0) is ProbeStep.SEND  # no SUBACK seen: probe anyway after a timeout
+    assert p.step(3.0) is ProbeStep.RECONNECT
+
+
+def test_liveness_off_never_asks_anything() -> None:
+    p = probe(interval=0.0)
+    p.subscribed(0.0)
+    assert all(p.step(t) is ProbeStep.NONE for t in (0.0, 1.0, 100.0))
+    assert not p.deaf
+
+
+def test_a_deaf_connection_is_left_for_the_next_node_soon_but_jittered() -> None:
+    p = policy(3, seed=4)
+    p.connected(0.0, 0)
+    waits = []
+    for i in range(40):
+        at = p.lost(100.0 * i, lasted=6.0, how=Loss.DEAF)
+        waits.append(at - 100.0 * i)
+    assert all(0.0 <= w <= 0.5 for w in waits) and len({round(w, 4) for w in waits}) > 10
+    assert not p.takeover_suspected  # short deaf connections are not a twin's doing
+    assert p.choose({0, 1, 2}) == 1  # the node after the deaf one first

@@ -101,7 +101,15 @@ def test_a_session_shows_in_the_metrics(rig: dict[str, Any], can_channel: str) -
         200,
         {
             "status": "ok",
-            "checks": {"started": True, "event_loop": True, "broker": True, "client_id_unique": True},
+            "broker": "connected",
+            "checks": {
+                "started": True,
+                "event_loop": True,
+                "broker": True,
+                "broker_receives": True,
+                "drc_broker_receives": True,
+                "client_id_unique": True,
+            },
         },
     )
 
@@ -110,6 +118,7 @@ def test_a_session_shows_in_the_metrics(rig: dict[str, Any], can_channel: str) -
     broker.stop(kill=True)
     wait_until(lambda: get(port, "/healthz")[0] == 503, 5, what="unhealthy without the broker")
     assert get(port, "/healthz")[1]["checks"]["broker"] is False
+    assert get(port, "/healthz")[1]["broker"] == "disconnected"  # not "deaf": nothing to hear from
     broker.start()
     wait_until(lambda: get(port, "/healthz")[0] == 200, 10, what="healthy after the reconnect")
     cloud = rig["cloud"] = CloudClient(broker.host, broker.port, GW)

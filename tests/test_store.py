@@ -9,6 +9,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from gateway.store import DB_NAME, StateStore
 
 
@@ -96,3 +98,52 @@ def test_the_device_task_journal_keeps_one_task_per_device(tmp_path: Path) -> No
     again.forget("AC-1", "f-2")
     assert again.recall("AC-1") is None
     again.close()
+
+
+# ------------------------------------------------------------------------------------------ the reply journal
+def test_a_reply_outlives_the_store_and_ages_out(tmp_path: Path) -> None:
+    now = [1_000_000]
+    store = StateStore(tmp_path, now_ms=lambda: now[0])
+    store.reply_recorded("tid-1", b'{"tid":"tid-1","data":{"result":0}}')
+    store.close()
+    again = StateStore(tmp_path, now_ms=lambda: now[0])
+    assert again.recorded_reply("tid-1", 120_000) == b'{"tid":"tid-1","data":{"result":0}}'
+    assert again.recorded_reply("tid-2", 120_000) is None
+    now[0] += 120_001
+    assert again.recorded_reply("tid-1", 120_000) is None  # older than the cache's age: a new request
+    again.close()
+
+
+def test_the_reply_journal_is_bounded_by_count_and_age(tmp_path: Path) -> None:
+    now = [0]
+    store = StateStore(tmp_path, now_ms=lambda: now[0])
+    for i in range(50):
+        now[0] = i
+        store.reply_recorded(f"t{i}", b"r")
+    assert store.replies_pruned(20) == 30
+    assert store.recorded_reply("t29", 10**9) is None and store.recorded_reply("t30", 10**9) == b"r"
+    now[0] = 100
+    assert store.replies_pruned(20, max_age_ms=60) == 10  # t30..t39 are older than 60 ms
+    assert store.recorded_reply("t40", 10**9) == b"r"
+    store.close()
+
+
+@pytest.mark.parametrize("damage", ["garbage", "truncated"])
+def test_a_damaged_store_is_set_aside_with_a_log_line_never_a_crash(
+    tmp_path: Path, damage: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    store = StateStore(tmp_path, now_ms=lambda: 5)
+    store.reply_recorded("tid-1", b"reply")
+    store.close()
+    path = tmp_path / DB_NAME
+    raw = path.read_bytes()
+    path.write_bytes(b"this is not a database" * 200 if damage == "garbage" else raw[:100] + b"\xff" * 3000)
+    with caplog.at_level("ERROR", logger="gateway.store"):
+        fresh = StateStore(tmp_path, now_ms=lambda: 7)
+    assert fresh.set_aside is not None and fresh.set_aside.exists()
+    assert fresh.set_aside.name == f"{DB_NAME}.damaged-7"
+    assert any("damaged" in r.getMessage() and "set aside" in r.getMessage() for r in caplog.records)
+    assert fresh.recorded_reply("tid-1", 10**9) is None  # an empty store, working
+    fresh.reply_recorded("tid-2", b"r2")
+    assert fresh.recorded_reply("tid-2", 10**9) == b"r2"
+    fresh.close()

@@ -304,7 +304,11 @@ class WebServer:
     async def _healthz(self, request: web.Request) -> web.Response:
         snap = await asyncio.get_running_loop().run_in_executor(None, self.obs.snapshot)
         healthy, checks = self.obs.health(snap)
-        body = {"status": "ok" if healthy else "unhealthy", "checks": checks}
+        body = {
+            "status": "ok" if healthy else "unhealthy",
+            "broker": self.obs.broker_state(snap),
+            "checks": checks,
+        }
         return web.json_response(body, status=200 if healthy else 503)
 
     async def _status(self, request: web.Request) -> web.Response:

@@ -192,6 +192,7 @@ class ConsoleState:
                     "nodes": nodes,
                     "connected": bool(bridge.connected),
                     "subscribed": bool(bridge.subscribed),
+                    "deaf": bool(getattr(bridge, "deaf", False)),
                 }
             )
         drc = getattr(app, "drc", None)
@@ -203,6 +204,7 @@ class ConsoleState:
                     "url": "(drc_mode_enter)",
                     "connected": bool(dedicated.connected),
                     "subscribed": bool(dedicated.subscribed),
+                    "deaf": bool(getattr(dedicated, "deaf", False)),
                 }
             )
         return out
