@@ -2,7 +2,7 @@
 #   make run    install the runtime dependencies only, start a local mosquitto (if none is given) and the
 #               gateway with simulated devices
 #   make test   set up .venv with the dev extras, install mosquitto and chromium if missing, run ruff, mypy and
-#               the whole pytest suite in parallel (TEST_WORKERS, default 6; hadolint comes from PyPI with the
+#               the whole pytest suite in parallel (TEST_WORKERS, default 10; hadolint comes from PyPI with the
 #               dev extras)
 #   make bench  print the benchmark tables (codecs, end-to-end round trips)
 
@@ -12,10 +12,11 @@ PY     := $(VENV)/bin/python
 # two stamps: the runtime install (`make run`) and the dev extras on top of it (`make test`, `make venv`)
 # pytest-xdist workers for `make test`: most tests wait on real brokers, devices and timeouts rather than
 # the CPU (the suite needs about 3 min of CPU), so more workers than cores overlap the waiting. On 2 cores,
-# each beside another run: -n 4 worksteal 369 s, -n 6 loadgroup long-first 337 s (CONTRIBUTING.md).
+# each beside another run: -n 4 worksteal 369 s, -n 6 loadgroup long-first 337 s (CONTRIBUTING.md); alone,
+# after issue #37's real-time return-home table: -n 6 377 s, -n 10 264 s (about 6.5 min of CPU now).
 # loadgroup keeps a module with shared fixtures on one worker (tests/conftest.py).
 # `make test TEST_WORKERS=0` runs the suite in one process.
-TEST_WORKERS ?= 6
+TEST_WORKERS ?= 10
 RUNTIME := $(VENV)/.installed-runtime
 DEV     := $(VENV)/.installed-dev
 

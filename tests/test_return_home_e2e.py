@@ -89,7 +89,7 @@ def _far_away(rig: dict[str, Any]) -> str | None:
 
 
 def _mid_wayline(rig: dict[str, Any]) -> str | None:
-    flight = _prepare_and_execute(rig)
+    flight = _prepare_and_execute(rig, rth_altitude=RTH_ALT)  # the lowest: the quickest descent
     _flying_leg_one(rig, flight)
     return flight
 

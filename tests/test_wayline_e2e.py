@@ -196,6 +196,7 @@ def _prepare(
     kmz: bytes,
     fingerprint: str | None = None,
     expires_in: float = 3600.0,
+    rth_altitude: int = 40,
 ) -> dict[str, Any]:
     name = f"{flight_id}.kmz"
     rig["store"].put(name, kmz)
@@ -203,17 +204,17 @@ def _prepare(
     fp = md5_hex(kmz) if fingerprint is None else fingerprint
     rig["files"][flight_id] = (name, fp)
     data = {"flight_id": flight_id, "execute_time": int(time.time() * 1000), "task_type": 0,
-            "wayline_type": 0, "file": {"url": url, "fingerprint": fp}, "rth_altitude": 40, "rth_mode": 1,
-            "out_of_control_action": 0, "exit_wayline_when_rc_lost": 1,
+            "wayline_type": 0, "file": {"url": url, "fingerprint": fp}, "rth_altitude": rth_altitude,
+            "rth_mode": 1, "out_of_control_action": 0, "exit_wayline_when_rc_lost": 1,
             "wayline_precision_type": 0}  # fmt: skip
     return rig["cloud"].service("flighttask_prepare", data)
 
 
-def _prepare_and_execute(rig: dict[str, Any]) -> str:
+def _prepare_and_execute(rig: dict[str, Any], rth_altitude: int = 40) -> str:
     """A route prepared and executed (both answered 0): its flight_id."""
     kmz, _ = _route_kmz()
     flight = str(uuid.uuid4())
-    assert _prepare(rig, flight, kmz)["data"]["result"] == 0
+    assert _prepare(rig, flight, kmz, rth_altitude=rth_altitude)["data"]["result"] == 0
     assert rig["cloud"].service("flighttask_execute", {"flight_id": flight})["data"]["result"] == 0
     return flight
 
