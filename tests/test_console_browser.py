@@ -608,7 +608,10 @@ def test_the_operator_accepts_a_cloud_control_request_in_the_page(
     try:
         page.goto(gateway["url"] + "/")
         page.wait_for_function("() => document.querySelector('#gw-sn').textContent !== ''", timeout=5000)
-        if page.locator("#signin").is_visible():  # the module's browser may hold a session already
+        # the module's browser may hold a session already: ask the gateway (the form is visible until the
+        # page's own session request comes back, so its visibility says nothing yet)
+        session = page.evaluate("() => fetch('/api/session').then(r => r.json())")
+        if not session.get("signed_in"):
             page.fill("#token", TOKEN)
             page.click("#signin button")
         page.wait_for_selector("#signedin:not([hidden])", timeout=5000)
