@@ -45,8 +45,12 @@ class Domain(enum.StrEnum):
 
     AIRCRAFT = "0"
     PAYLOAD = "1"  # a gimbal or camera of its own
-    RC = "2"  # a remote controller, or (here) a ground robot
+    RC = "2"  # a remote controller
     DOCK = "3"
+    #: not DJI's (its domains are 0-3): a ground robot, announced as its own gateway so that a cloud
+    #: reading DJI's model neither takes it for a remote controller nor drops the dock's update_topo
+    #: (docs/cloud-api.md "Device tree")
+    ROBOT = "100"
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,11 +63,26 @@ class DeviceInfo:
     sub_type: int
     thing_version: str = "1.1.2"
     payload_index: str | None = None
+    #: ``update_topo``: "sub_device" (listed by this gateway) or "gateway" (announced under its own sn)
+    announce: str = "sub_device"
+    #: the aircraft (sn) that carries this payload: reported inside that aircraft's osd/state, not announced
+    carried_by: str | None = None
 
     @classmethod
-    def of(cls, sn: str, product: Any, payload_index: str | None = None) -> DeviceInfo:
+    def of(
+        cls, sn: str, product: Any, payload_index: str | None = None, carried_by: str | None = None
+    ) -> DeviceInfo:
         """From a device's settings: its serial number, ``product`` fields and payload index."""
-        return cls(sn, product.domain, product.type, product.sub_type, product.thing_version, payload_index)
+        return cls(
+            sn,
+            product.domain,
+            product.type,
+            product.sub_type,
+            product.thing_version,
+            payload_index,
+            getattr(product, "announce", "sub_device"),
+            carried_by,
+        )
 
 
 @dataclass(frozen=True, slots=True)

@@ -6,9 +6,9 @@ collect them in one discriminated union on ``type``.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, SecretStr
+from pydantic import BaseModel, ConfigDict, Field, SecretStr
 
 __all__ = ["DEVICE_MODEL_CONFIG", "ProductSettings", "with_family_defaults"]
 
@@ -28,6 +28,12 @@ class ProductSettings(BaseModel):
     sub_type: int = 0
     thing_version: str = "1.1.2"
     device_secret: SecretStr | None = None
+    announce: Literal["sub_device", "gateway"] = Field(
+        "sub_device",
+        description="where a device is announced: in this gateway's update_topo (sub_device), or on its own "
+        "sys/product/{sn}/status as a gateway listing itself (gateway: a device DJI's model has no "
+        'place for, docs/cloud-api.md "Device tree"); the gateway\'s own product: sub_device only',
+    )
 
 
 def with_family_defaults(default: ProductSettings, value: Any) -> Any:

@@ -98,6 +98,10 @@ class GatewayApp:
         s = self.settings
         gw = s.gateway_sn
         subs = [(name, 1) for name in subscriptions(gw)]
+        # a device announced as its own gateway (docs/cloud-api.md "Device tree") takes services on its own
+        # topic too: a cloud that reads it as a gateway sends them there
+        own = [a.info.sn for a in self.devices if a.info.announce == "gateway"]
+        subs += [(topic(TopicKind.SERVICES, sn), 1) for sn in own]
         # build the objects, then connect them with typed callbacks (as paho's are assigned)
         bridge = self.bridge = MqttBridge(
             s.broker.for_live_control(s.drc.heartbeat_timeout),
@@ -169,6 +173,7 @@ class GatewayApp:
         bridge.set_will(*offline)
         self.dispatcher = Dispatcher(
             gateway_sn=gw,
+            own_gateways=frozenset(own),
             registry=self.registry,
             devices=self.devices,
             outbox=outbox,
@@ -272,6 +277,7 @@ class GatewayApp:
                 # a fresh goodbye: the will was fixed at connect (its tid and timestamp are the connect's);
                 # a clean stop tells the time it went offline (issue #38)
                 offline = (offline[0], self.northbound.topology(offline=True))
+                self.northbound.publish_own_offline()  # queued before the goodbye, delivered in order
             await asyncio.to_thread(self.bridge.stop, offline)
         await asyncio.gather(*(a.stop() for a in self.devices), return_exceptions=True)
         if self.web is not None:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import contextvars
 import logging
 import re
 from collections import OrderedDict
@@ -133,6 +134,12 @@ class _Cached:
     waiters: list[asyncio.Future[bytes]]
 
 
+#: the device whose own ``services`` topic the request in hand came on (it is announced as a gateway of its
+#: own, docs/cloud-api.md "Device tree"); None: the gateway's topic. Set per message task, read when routing
+#: and replying.
+_VIA: contextvars.ContextVar[str | None] = contextvars.ContextVar("dispatcher_via", default=None)
+
+
 class Dispatcher:
     def __init__(
         self,
@@ -151,8 +158,11 @@ class Dispatcher:
         on_requests_reply: Callable[[Any], None] | None = None,
         cloud_control: CloudControlCalls | None = None,
         journal: ReplyJournal | None = None,
+        own_gateways: frozenset[str] = frozenset(),
     ) -> None:
         self.gateway_sn = gateway_sn
+        #: devices announced as gateways of their own: their ``services`` topic is served too
+        self.own_gateways = own_gateways
         #: replies kept across restarts (written before they are published); None: in memory only
         self.journal = journal
         self.registry = registry
@@ -192,6 +202,7 @@ class Dispatcher:
 
     async def handle(self, topic_name: str, payload: bytes, oversize: bool = False) -> None:
         """Handle one message; never raises."""
+        token = _VIA.set(None)  # _handle names the device topic; never left over for the caller
         try:
             await self._handle(topic_name, payload, oversize)
         except Exception:
@@ -199,6 +210,8 @@ class Dispatcher:
             log.exception("unexpected error while handling a message on %s", topic_name[:200])
             with contextlib.suppress(Exception):
                 self._reply_raw(payload, ResultCode.INTERNAL_ERROR, "internal error in the gateway")
+        finally:
+            _VIA.reset(token)
 
     async def _handle(self, topic_name: str, payload: bytes, oversize: bool) -> None:
         try:
@@ -208,9 +221,11 @@ class Dispatcher:
             log.warning("ignored a message on an unknown topic: %s", exc)
             return
         if sn != self.gateway_sn:
-            self.metrics.inc("inbound_rejected_total", reason="foreign_sn")
-            log.warning("ignored %s for another gateway", kind.value)
-            return
+            if not (kind is TopicKind.SERVICES and sn in self.own_gateways):
+                self.metrics.inc("inbound_rejected_total", reason="foreign_sn")
+                log.warning("ignored %s for another gateway", kind.value)
+                return
+            _VIA.set(sn)  # reset by handle()
         if oversize:
             self.metrics.inc("inbound_rejected_total", reason="oversize")
             log.warning("refused an oversize %s payload", kind.value)
@@ -257,7 +272,7 @@ class Dispatcher:
                 await self._run_services(request, reply_to)
                 return
             reply = error_reply_from_validation(
-                TopicKind.SERVICES, payload, exc, timestamp=self.clock.time_ms(), gateway=self.gateway_sn
+                TopicKind.SERVICES, payload, exc, timestamp=self.clock.time_ms(), gateway=self._answering()
             )
             method = _peek(_METHOD, payload) or "?"
             logcontext.set_context(method=_metric_method(method), tid=_peek(_TID, payload))
@@ -320,7 +335,7 @@ class Dispatcher:
         started = self.clock.monotonic()
         result, output = await self._execute(request)
         reply = reply_for(
-            request, int(result), output, timestamp=self.clock.time_ms(), gateway=self.gateway_sn
+            request, int(result), output, timestamp=self.clock.time_ms(), gateway=self._answering()
         )
         raw = reply.model_dump_json().encode()
         elapsed = self.clock.monotonic() - started
@@ -353,6 +368,9 @@ class Dispatcher:
             return ResultCode.BUSY, {"reason": "too many requests in flight"}
         self._pending += 1
         try:
+            via = _VIA.get()
+            if via is not None and method not in _AUTHORITY_METHODS:
+                return await self._on_own_topic(via, method, data)
             if method in _AUTHORITY_METHODS:
                 return await self._grab_authority(method, data)
             if self.cloud_control is not None and method in self.cloud_control.methods:
@@ -373,6 +391,28 @@ class Dispatcher:
             return await self._call(adapter, method, data)
         finally:
             self._pending -= 1
+
+    async def _on_own_topic(
+        self, sn: str, method: str, data: InboundModel
+    ) -> tuple[int, dict[str, Any] | None]:
+        """A request on the ``services`` topic of a device announced as its own gateway: that device serves
+        it, or it is refused saying where to send it (live control, wayline tasks and cloud control belong
+        to this gateway, whose serial number the reason names)."""
+        adapter = self.devices.by_sn(sn)
+        if adapter is None or not adapter.supports(method):
+            return ResultCode.METHOD_NOT_SUPPORTED, {
+                "reason": f"{method} is not served by {sn}: send it to the gateway {self.gateway_sn}"
+            }
+        index = getattr(data, "payload_index", None)
+        if isinstance(index, str) and index != adapter.info.payload_index:
+            return ResultCode.INVALID_PARAMETERS, {"reason": f"no payload {index} on {sn}"}
+        other = getattr(data, "sn", None)
+        if isinstance(other, str) and other != sn:
+            return ResultCode.INVALID_PARAMETERS, {"reason": f"sn {other} is not {sn}"}
+        denied = self._authority_check(method, data, adapter)
+        if denied is not None:
+            return denied
+        return await self._call(adapter, method, data)
 
     def _route(
         self, method: str, data: InboundModel
@@ -521,7 +561,11 @@ class Dispatcher:
         if reply_to is not None:
             reply_to(raw)
             return
-        self.outbox.publish(topic(TopicKind.SERVICES_REPLY, self.gateway_sn), raw, qos=1)
+        self.outbox.publish(topic(TopicKind.SERVICES_REPLY, self._answering()), raw, qos=1)
+
+    def _answering(self) -> str:
+        """The serial number a services reply goes out under: the topic's the request came on."""
+        return _VIA.get() or self.gateway_sn
 
     def _reply_raw(
         self, payload: bytes, result: int, reason: str, reply_to: Callable[[bytes], None] | None = None
@@ -534,7 +578,7 @@ class Dispatcher:
             tid=tid,
             bid=bid,
             timestamp=self.clock.time_ms(),
-            gateway=self.gateway_sn,
+            gateway=self._answering(),
             method=method,
             data=ResultReply(result=result, output=ErrorOutput(reason=reason)),
         )

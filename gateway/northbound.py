@@ -21,7 +21,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from adapters.base import Adapter, Domain
+from adapters.base import Adapter, DeviceInfo, Domain
 from gateway.clock import Clock
 from gateway.devices import DeviceTable
 from gateway.dispatcher import Outbox
@@ -104,12 +104,27 @@ class Northbound:
     # -- TelemetrySink ----------------------------------------------------------------------------
     def osd(self, sn: str, data: Mapping[str, Any]) -> None:
         adapter = self.devices.by_sn(sn)
-        if adapter is None:
-            return
+        if adapter is None or adapter.info.carried_by is not None:
+            return  # a carried payload's values travel inside its aircraft's osd (below)
+        if adapter.info.domain == Domain.AIRCRAFT:
+            data = {**data, **self._carried_osd(sn)}
         raw = self._telemetry(TopicKind.OSD, adapter, data)
         if raw is not None:
             self.outbox.publish(topic(TopicKind.OSD, sn), raw, qos=0)
             self.metrics.inc("osd_published_total", device=sn)
+
+    def _carried_osd(self, aircraft_sn: str) -> dict[str, Any]:
+        """``{payload_index: {payload_index, gimbal_pitch, gimbal_roll, gimbal_yaw}}`` of the payloads the
+        aircraft carries: DJI reports an aircraft's gimbals this way (AircraftOsd's payload keys)."""
+        out: dict[str, Any] = {}
+        for payload in self.carried(aircraft_sn):
+            index = payload.info.payload_index
+            body = payload.osd_snapshot() or {}
+            if index is None:
+                continue
+            angles = {k: body[k] for k in ("gimbal_pitch", "gimbal_roll", "gimbal_yaw") if k in body}
+            out[index] = {"payload_index": index, **angles}
+        return out
 
     def state(self, sn: str, data: Mapping[str, Any]) -> None:
         adapter = self.devices.by_sn(sn)
@@ -171,7 +186,11 @@ class Northbound:
         log.info("device %s is %s", sn, "online" if online else "offline")
         self.publish_topology()
         adapter = self.devices.by_sn(sn)
-        if online and adapter is not None:  # what it is (firmware, authority) as soon as it is there
+        if adapter is not None and adapter.info.carried_by is not None:
+            carrier = self.devices.by_sn(adapter.info.carried_by)
+            if carrier is not None and carrier.online:  # its payloads list gains or loses this one
+                self.publish_state(carrier)
+        elif online and adapter is not None:  # what it is (firmware, authority) as soon as it is there
             self.publish_state(adapter)
 
     def authority_lost(self, sn: str, *, requested: bool = False) -> None:
@@ -210,65 +229,115 @@ class Northbound:
             self.metrics.inc("events_resent_total")
 
     # -- topology and state -----------------------------------------------------------------------
+    def _sub_device(self, i: int, info: DeviceInfo) -> dict[str, Any]:
+        return {
+            "sn": info.sn,
+            "domain": info.domain,
+            "type": info.type,
+            "sub_type": info.sub_type,
+            "index": channel_index(i),
+            "device_secret": _device_secret(self.settings, info.sn),
+            "nonce": secrets.token_hex(8),
+            "thing_version": info.thing_version,
+        }
+
+    def _update_topo(self, sn: str, head: dict[str, Any], subs: list[dict[str, Any]]) -> bytes:
+        body = {**head, "nonce": secrets.token_hex(8), "sub_devices": subs}
+        msg = self.registry.build(TopicKind.STATUS, "update_topo", body, gateway=sn, **self._ids())
+        return msg.model_dump_json(context={"reveal_secrets": True}).encode()
+
     def topology(self, *, offline: bool = False) -> bytes:
-        """``update_topo`` with the online devices (none when ``offline``: the gateway is leaving)."""
+        """``update_topo`` with the online devices this gateway lists (none when ``offline``: the gateway is
+        leaving). Not listed: a payload carried by an aircraft (reported inside its osd/state) and a device
+        announced as its own gateway (:meth:`own_topology`); docs/cloud-api.md "Device tree"."""
         p = self.settings.product
         secret = p.device_secret.get_secret_value() if p.device_secret else ""
         subs = []
         if not offline:
             for i, adapter in enumerate(self.devices):
-                if not adapter.online:
-                    continue
                 info = adapter.info
-                subs.append(
-                    {
-                        "sn": info.sn,
-                        "domain": info.domain,
-                        "type": info.type,
-                        "sub_type": info.sub_type,
-                        "index": channel_index(i),
-                        "device_secret": _device_secret(self.settings, info.sn),
-                        "nonce": secrets.token_hex(8),
-                        "thing_version": info.thing_version,
-                    }
-                )
-        body = {
+                if adapter.online and info.announce == "sub_device" and info.carried_by is None:
+                    subs.append(self._sub_device(i, info))
+            # aircraft first: DJI's reference cloud reads only ``sub_devices[0]`` (a DJI gateway carries one
+            # aircraft); each keeps the channel index of its place in the settings
+            subs.sort(key=lambda d: d["domain"] != Domain.AIRCRAFT)
+        head = {
             "domain": p.domain,
             "type": p.type,
             "sub_type": p.sub_type,
             "device_secret": secret,
-            "nonce": secrets.token_hex(8),
             "thing_version": p.thing_version,
-            "sub_devices": subs,
         }
-        msg = self.registry.build(
-            TopicKind.STATUS, "update_topo", body, gateway=self.gateway_sn, **self._ids()
-        )
-        return msg.model_dump_json(context={"reveal_secrets": True}).encode()
+        return self._update_topo(self.gateway_sn, head, subs)
+
+    def own_gateways(self) -> list[Adapter]:
+        """The devices announced as gateways of their own (``product.announce = "gateway"``)."""
+        return [a for a in self.devices if a.info.announce == "gateway"]
+
+    def own_topology(self, adapter: Adapter, *, offline: bool = False) -> tuple[str, bytes]:
+        """A device that is its own gateway: ``update_topo`` on ``sys/product/{its sn}/status`` with its own
+        product fields, listing itself while it is online (channel "A") and nothing once it is not; so its
+        online state travels the way a sub-device's does, and the dock's ``update_topo`` holds only what
+        DJI's model knows (docs/cloud-api.md "Device tree")."""
+        info = adapter.info
+        head = {
+            "domain": info.domain,
+            "type": info.type,
+            "sub_type": info.sub_type,
+            "device_secret": _device_secret(self.settings, info.sn),
+            "thing_version": info.thing_version,
+        }
+        subs = [self._sub_device(0, info)] if adapter.online and not offline else []
+        return topic(TopicKind.STATUS, info.sn), self._update_topo(info.sn, head, subs)
 
     def publish_topology(self) -> None:
         """Called from device callbacks: a topology that cannot be built is logged, never raised into them."""
         try:
-            raw = self.topology()
+            messages = [(topic(TopicKind.STATUS, self.gateway_sn), self.topology())]
+            messages += [self.own_topology(a) for a in self.own_gateways()]
         except ValidationError as exc:
             self.metrics.inc("outbound_invalid_total", kind="status")
             log.error("dropped an invalid update_topo: %s", exc.errors()[:2])
             return
-        self.outbox.publish(topic(TopicKind.STATUS, self.gateway_sn), raw, qos=1)
-        self.metrics.inc("topology_published_total")
+        for name, raw in messages:
+            self.outbox.publish(name, raw, qos=1)
+            self.metrics.inc("topology_published_total")
+
+    def publish_own_offline(self) -> None:
+        """A clean stop: every device announced as its own gateway is offline too (the MQTT will covers
+        only the gateway's own topic)."""
+        for adapter in self.own_gateways():
+            try:
+                name, raw = self.own_topology(adapter, offline=True)
+            except ValidationError as exc:
+                log.error("dropped an invalid update_topo: %s", exc.errors()[:2])
+                continue
+            self.outbox.publish(name, raw, qos=1)
+
+    def carried(self, aircraft_sn: str) -> list[Adapter]:
+        """The online payloads an aircraft carries (``carried_by``), reported inside its osd and state."""
+        return [a for a in self.devices if a.info.carried_by == aircraft_sn and a.online]
 
     def publish_state(self, adapter: Adapter) -> None:
+        if adapter.info.carried_by is not None:  # its state is a line of its aircraft's payloads list
+            carrier = self.devices.by_sn(adapter.info.carried_by)
+            if carrier is not None and carrier.online:
+                self.publish_state(carrier)
+            return
         body = dict(adapter.state_snapshot() or {})
         if profile_of(adapter) in (Profile.GIMBAL, Profile.AIRCRAFT):
             auth = self.devices.authority
-            if adapter.info.payload_index:
-                held = adapter.info.payload_index in auth.payloads
+            payloads = [adapter] if adapter.info.payload_index else []
+            if profile_of(adapter) is Profile.AIRCRAFT:
+                payloads += self.carried(adapter.info.sn)
+            if payloads:
                 body["payloads"] = [
                     {
-                        "control_source": "A" if held else "",
-                        "payload_index": adapter.info.payload_index,
-                        "sn": adapter.info.sn,
+                        "control_source": "A" if p.info.payload_index in auth.payloads else "",
+                        "payload_index": p.info.payload_index,
+                        "sn": p.info.sn,
                     }
+                    for p in payloads
                 ]
             if profile_of(adapter) is Profile.AIRCRAFT:
                 body.setdefault("control_source", "A" if adapter.info.sn in auth.flight else "")
@@ -280,7 +349,7 @@ class Northbound:
         telemetry from gateways they have not registered)."""
         self.publish_topology()
         for adapter in self.devices:
-            if adapter.online:
+            if adapter.online and adapter.info.carried_by is None:
                 self.publish_state(adapter)
         self._next_osd.clear()
 
@@ -298,7 +367,7 @@ class Northbound:
             due = self._next_osd.get(sn)
             if due is None:  # first time, or after a reconnect: the device's phase in the period
                 due = self._next_osd[sn] = now + period * i / count
-            if not adapter.online or now < due:
+            if not adapter.online or now < due or adapter.info.carried_by is not None:
                 continue
             due += period
             self._next_osd[sn] = due if due > now else now + period  # fell behind: skip, never burst

@@ -433,6 +433,20 @@ class GatewaySettings(BaseSettings):
         idx = [i for i in (getattr(d, "payload_index", None) for d in self.devices) if i is not None]
         if len(set(idx)) != len(idx):
             raise ValueError("payload_index values must be unique")
+        if self.product.announce != "sub_device":
+            raise ValueError(
+                "product.announce: the gateway announces itself; only a device may say 'gateway'"
+            )
+        if self.gateway_sn in sns:
+            raise ValueError(f"a device may not have the gateway's serial number {self.gateway_sn}")
+        domains = {d.sn: d.product.domain for d in self.devices}
+        for d in self.devices:
+            carrier = getattr(d, "carried_by", None)
+            if carrier is not None and domains.get(carrier) != "0":
+                raise ValueError(
+                    f"devices[{d.sn}].carried_by = {carrier!r}: no aircraft (domain 0) with that sn is "
+                    "configured here"
+                )
         m, c = self.metrics, self.console
         if m.enabled and c.enabled and c.token is None and not is_loopback(m.host):
             raise ValueError(

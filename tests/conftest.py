@@ -75,6 +75,7 @@ SHARED_FIXTURE_MODULES = frozenset(
         "test_brokers_cluster.py",
         "test_cloud_interop.py",
         "test_console_browser.py",
+        "test_device_tree.py",
         "test_drc_interop.py",
         "test_fly.py",
         "test_schemas_export.py",

@@ -148,8 +148,36 @@ def test_device_identity_defaults_and_payload_index() -> None:
     aircraft = OsdkDeviceSettings(sn="A1", url="/dev/null").product
     robot = RobomasterDeviceSettings(sn="R1", url="/dev/null").product
     gateway = GatewaySettings(gateway_sn="GW").product
-    assert [(p.domain, p.type, p.sub_type) for p in (aircraft, robot, gateway)] == [
-        ("0", 60, 0),
-        ("2", 56, 0),
-        ("3", 1, 0),
+    assert [(p.domain, p.type, p.sub_type, p.announce) for p in (aircraft, robot, gateway)] == [
+        ("0", 60, 0, "sub_device"),
+        ("100", 1, 0, "gateway"),  # issue #38: its own gateway, in a domain no DJI device claims
+        ("3", 1, 0, "sub_device"),
     ]
+    # the earlier identity stays available to an integrator whose cloud must see the robot as an RC
+    old = RobomasterDeviceSettings(
+        sn="R1", url="/dev/null", product={"domain": "2", "type": 56, "announce": "sub_device"}
+    )
+    assert (old.product.domain, old.product.type, old.product.announce) == ("2", 56, "sub_device")
+
+
+def test_a_carried_gimbal_names_an_aircraft_configured_here() -> None:
+    """Issue #38: ``carried_by`` makes a gimbal its aircraft's payload; it must name a configured aircraft,
+    and only a device (never the gateway itself) may be announced as a gateway of its own."""
+    from gateway.settings import GatewaySettings
+
+    aircraft = {"type": "osdk", "sn": "A1", "url": "/dev/null"}
+    gimbal = {"type": "rsdk", "sn": "G1", "carried_by": "A1"}
+    ok = GatewaySettings(gateway_sn="GW", devices=[aircraft, gimbal])
+    assert ok.devices[1].carried_by == "A1"
+    with pytest.raises(ValueError, match="no aircraft"):
+        GatewaySettings(gateway_sn="GW", devices=[gimbal])
+    with pytest.raises(ValueError, match="no aircraft"):  # a robot is no aircraft
+        GatewaySettings(
+            gateway_sn="GW", devices=[{"type": "robomaster", "sn": "A1", "url": "/dev/null"}, gimbal]
+        )
+    with pytest.raises(ValueError, match="announce"):
+        GatewaySettings(gateway_sn="GW", product={"announce": "gateway"})
+    with pytest.raises(ValueError, match="announce"):
+        GatewaySettings(gateway_sn="GW", devices=[aircraft, {**gimbal, "product": {"announce": "gateway"}}])
+    with pytest.raises(ValueError, match="serial number"):
+        GatewaySettings(gateway_sn="A1", devices=[aircraft])

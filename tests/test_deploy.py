@@ -316,7 +316,13 @@ def test_the_compose_topology_runs_as_plain_processes(
 ) -> None:
     cloud: CloudClient = stack["cloud"]
     sns = {"RS-0001", "FC-0001", "RM-0001"}
-    cloud.wait_for("status", lambda b: {d["sn"] for d in b["data"]["sub_devices"]} == sns, timeout=20)
+    listed = {"RS-0001", "FC-0001"}  # the robot is its own gateway (docs/cloud-api.md "Device tree")
+    cloud.wait_for(
+        "DJIGW-0001/status", lambda b: {d["sn"] for d in b["data"]["sub_devices"]} == listed, timeout=20
+    )
+    cloud.wait_for(
+        "RM-0001/status", lambda b: [d["sn"] for d in b["data"]["sub_devices"]] == ["RM-0001"], timeout=20
+    )
     for sn in sns:
         cloud.wait_for(f"{sn}/osd", timeout=10)
 
@@ -391,7 +397,8 @@ def test_the_compose_topology_runs_as_plain_processes(
     # compose stop: SIGTERM, motion stopped, offline topology, exit 0; the broker keeps its state on disk
     cloud.clear()
     assert stack["gateway"].stop() == 0, stack["gateway"].output()[-2000:]
-    assert cloud.wait_for("status", timeout=5)[-1]["data"]["sub_devices"] == []
+    assert cloud.wait_for("DJIGW-0001/status", timeout=5)[-1]["data"]["sub_devices"] == []
+    assert cloud.wait_for("RM-0001/status", timeout=5)[-1]["data"]["sub_devices"] == []
     mosquitto = next(p for p in stack["procs"] if p.name == "mosquitto")
     assert mosquitto.stop() == 0
     assert (stack["data"] / "mosquitto.db").exists(), mosquitto.output()[-1000:]

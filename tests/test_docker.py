@@ -73,12 +73,11 @@ def test_the_images_default_command_runs_the_simulated_gateway(broker: LocalBrok
         text=True,
     )
     try:
-        topo = cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 3, timeout=30)[-1]
-        assert {d["sn"] for d in topo["data"]["sub_devices"]} == {
-            "RSDK-SIM-0001",
-            "RM-SIM-0001",
-            "OSDK-SIM-0001",
-        }
+        topo = cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 2, timeout=30)[-1]
+        assert {d["sn"] for d in topo["data"]["sub_devices"]} == {"RSDK-SIM-0001", "OSDK-SIM-0001"}
+        # the robot: its own gateway, listing itself (docs/cloud-api.md "Device tree")
+        own = cloud.wait_for("RM-SIM-0001/status", lambda b: len(b["data"]["sub_devices"]) == 1, timeout=10)
+        assert own[-1]["data"]["domain"] == "100"
     finally:
         proc.terminate()
         out = proc.communicate(timeout=20)[0]

@@ -86,8 +86,9 @@ class Rig:
         return self.cloud.wait_for(f"{SN}/osd", lambda b: predicate(b["data"]), timeout=timeout)[-1]["data"]
 
     def in_topology(self, present: bool, timeout: float = 6.0) -> None:
+        """The robot's own update_topo (it is announced as its own gateway) lists it, or no longer does."""
         self.cloud.wait_for(
-            "status",
+            f"{SN}/status",
             lambda b: any(d["sn"] == SN for d in b["data"]["sub_devices"]) == present,
             timeout=timeout,
         )
@@ -127,9 +128,14 @@ def _ok(reply: dict[str, Any]) -> None:
 def test_match_telemetry_arrives_as_osd_and_state(broker: LocalBroker, tmp_path: Path, season: str) -> None:
     r = Rig(broker, tmp_path, season)
     try:
-        topo = r.cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 1)[-1]
+        # the robot is its own gateway in a domain no DJI device claims (docs/cloud-api.md "Device tree"):
+        # announced on its own status topic, listing itself; the dock's update_topo does not hold it
+        topo = r.cloud.wait_for(f"{SN}/status", lambda b: len(b["data"]["sub_devices"]) == 1)[-1]
+        assert topo["gateway"] == SN and (topo["data"]["domain"], topo["data"]["type"]) == ("100", 1)
         sub = topo["data"]["sub_devices"][0]
-        assert (sub["sn"], sub["domain"], sub["type"]) == (SN, "2", 56)
+        assert (sub["sn"], sub["domain"], sub["type"], sub["index"]) == (SN, "100", 1, "A")
+        dock = r.cloud.wait_for(f"{GW}/status", count=1) + r.cloud.find(f"{GW}/status")
+        assert all(b["data"]["sub_devices"] == [] for b in dock)
         # state on change: the robot id, then the match's stages up to "in game"
         r.cloud.wait_for(f"{SN}/state", lambda b: b["data"].get("x_robot_id") == 3)
         r.cloud.wait_for(f"{SN}/state", lambda b: b["data"].get("x_game_progress") == 4)
@@ -355,7 +361,7 @@ def test_bad_robot_settings_fail_with_one_clear_line(device: dict[str, Any], whe
     with pytest.raises(ConfigError) as exc:
         load_settings(None, gateway_sn="GW", devices=[doc])
     assert f"devices.0.robomaster.{where}" in str(exc.value)
-    assert RobomasterDeviceSettings(type="robomaster", sn="R1", url="/dev/ttyUSB0").product.domain == "2"
+    assert RobomasterDeviceSettings(type="robomaster", sn="R1", url="/dev/ttyUSB0").product.domain == "100"
 
 
 def test_live_control_drives_the_robot(broker: LocalBroker, tmp_path: Path) -> None:

@@ -275,7 +275,12 @@ def test_many_devices_one_topology_unique_channels_and_a_prompt_stop(broker: Loc
     ]  # fmt: skip
     n = 70
     farm = TcpFarm([RobomasterSim(RefereeMatch(hit_period=0.0)) for _ in range(n)], tick_interval=0.2).start()
-    devices = [{"type": "robomaster", "sn": f"RM-{i:03d}", "url": url} for i, url in enumerate(farm.urls)]
+    # listed by the gateway (announce = sub_device), not each its own gateway: one topology of 70
+    listed = {"announce": "sub_device"}
+    devices = [
+        {"type": "robomaster", "sn": f"RM-{i:03d}", "url": url, "product": listed}
+        for i, url in enumerate(farm.urls)
+    ]
     cloud = CloudClient(broker.host, broker.port, "GW-MANY-1")
     gw = GatewayThread(gateway_settings(broker.port, devices, gateway_sn="GW-MANY-1")).start()
     try:

@@ -66,7 +66,8 @@ def test_sigterm_mid_mission_stops_every_device(broker: LocalBroker, tmp_path: P
         env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )
     try:
-        cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 3, timeout=20)
+        cloud.wait_for(f"{GW}/status", lambda b: len(b["data"]["sub_devices"]) == 2, timeout=20)
+        cloud.wait_for("RM-STOP-1/status", lambda b: len(b["data"]["sub_devices"]) == 1, timeout=20)
         # the gimbal drags, the robot drives, the aircraft flies a mission
         assert cloud.service("payload_authority_grab", {"payload_index": "20-0-0"})["data"]["result"] == 0
         drive = {"sn": "RM-STOP-1", "vx": 1.0, "vy": 0.0, "wz": 0.0, "duration": 10.0}
@@ -95,7 +96,9 @@ def test_sigterm_mid_mission_stops_every_device(broker: LocalBroker, tmp_path: P
         assert robot.board.last_stop_reason is not None and robot.board.vx == 0.0
         assert fc.inspect(lambda m: m.task) == "hover"  # mission cancelled, braking to a hover
         wait_until(lambda: fc.inspect(lambda m: m.speed) < 0.3, 10, what="aircraft hovering")
-        assert cloud.wait_for("status", timeout=5)[-1]["data"]["sub_devices"] == []
+        assert cloud.wait_for(f"{GW}/status", timeout=5)[-1]["data"]["sub_devices"] == []
+        # the robot, its own gateway, is announced offline on its own topic (the will covers only GW's)
+        assert cloud.wait_for("RM-STOP-1/status", timeout=5)[-1]["data"]["sub_devices"] == []
         assert elapsed < 10.0
         # the take-off's final progress event went out before the offline topology
         kinds = [(t.rsplit("/", 1)[1], b.get("method"), (b.get("data") or {}).get("status"))

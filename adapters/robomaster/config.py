@@ -4,11 +4,15 @@ The gateway sits on one UART with the robot's main board (e.g. a Taproot ``DJISe
 which passes the referee system's frames through and obeys the gateway's control messages
 (``adapters.robomaster.commands`` documents that wire contract).
 
-Product fields: the Cloud API has no ground-robot domain or type. The default is ``2-56-0`` (domain 2, the
-ground-side namespace DJI uses for remote controllers; type 56 "DJI RC") because DJI's Java Cloud SDK
-resolves every ``update_topo`` entry with ``DeviceEnum.find`` and rejects a combination it does not list
-(the whole topology then fails); a cloud that knows robots can configure its own. ``"0"`` and ``"1"`` are
-refused: the gateway would publish aircraft or gimbal bodies for them. The gimbal's ``payload_index`` is
+Product fields: the Cloud API has no ground-robot domain or type (DJI's domains: 0 aircraft, 1 payload, 2
+remote controller, 3 dock). The default is ``100-1-0`` announced as its own gateway (``announce =
+"gateway"``): the robot publishes its own ``update_topo`` on ``sys/product/{robot_sn}/status``, listing
+itself while its link is up, so a cloud that builds DJI's device tree shows it apart from the dock and its
+aircraft, never as a remote controller, and a cloud on DJI's Java SDK, which refuses an ``update_topo``
+holding a domain it does not know, still reads the dock's (docs/cloud-api.md "Device tree"). The
+earlier default, ``{domain = "2", type = 56, announce = "sub_device"}``, makes DJI's Java SDK read the
+robot as a DJI RC behind the dock; an integrator may choose it. ``"0"`` and ``"1"`` are refused: the
+gateway would publish aircraft or gimbal bodies for them. The gimbal's ``payload_index`` is
 ``{type}-{sub_type}-{gimbal_index}`` of the payload type the cloud should load (e.g. ``39-0-7``, DJI's FPV
 camera at the FPV position).
 """
@@ -60,7 +64,7 @@ class ControlSettings(BaseModel):
 
 
 #: The family's Cloud API identity (docs/cloud-api.md "Device identity").
-ROBOMASTER_PRODUCT = ProductSettings(domain="2", type=56, sub_type=0)
+ROBOMASTER_PRODUCT = ProductSettings(domain="100", type=1, sub_type=0, announce="gateway")
 
 
 class RobomasterDeviceSettings(BaseModel):
@@ -76,7 +80,8 @@ class RobomasterDeviceSettings(BaseModel):
     )
     product: ProductSettings = Field(
         ROBOMASTER_PRODUCT,
-        description="Cloud API identity; no DJI type exists for a robot: default 2-56-0, resolvable (docs)",
+        description="Cloud API identity; no DJI domain or type exists for a robot: default 100-1-0 announced "
+        'as its own gateway (docs/cloud-api.md "Device tree")',
     )
     url: str = Field(
         min_length=1, description="pyserial URL: /dev/ttyUSB0, /dev/serial/by-id/…, socket://host:port, a pty"

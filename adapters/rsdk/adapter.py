@@ -136,7 +136,9 @@ class GimbalAdapter(SupervisedAdapter):
     def __init__(self, settings: RsdkDeviceSettings, *, clock: Clock = SYSTEM_CLOCK) -> None:
         self.settings = settings
         super().__init__(
-            DeviceInfo.of(settings.sn, settings.product, settings.payload_index), settings, clock
+            DeviceInfo.of(settings.sn, settings.product, settings.payload_index, settings.carried_by),
+            settings,
+            clock,
         )
         self._rx = Reassembler(rx_id=settings.rx_id)
         self._seq = 0

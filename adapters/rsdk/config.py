@@ -36,6 +36,21 @@ class RsdkDeviceSettings(BaseModel):
         "a value that says otherwise is refused",
     )
 
+    carried_by: str | None = Field(
+        None,
+        pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$",
+        description="sn of the aircraft (an osdk device here) that carries this gimbal: reported as its "
+        "payload (inside its osd and state, not in update_topo); unset: a stand-alone payload",
+    )
+
+    @model_validator(mode="after")
+    def _carried(self) -> RsdkDeviceSettings:
+        if self.carried_by is not None and self.product.announce != "sub_device":
+            raise ValueError(
+                "a carried gimbal is reported by its aircraft: product.announce must stay sub_device"
+            )
+        return self
+
     @model_validator(mode="after")
     def _payload_index(self) -> RsdkDeviceSettings:
         derived = f"{self.product.type}-{self.product.sub_type}-{self.gimbal_index}"

@@ -483,6 +483,7 @@ class DeviceView:
     sn: str
     domain: str = "?"
     online: bool = False
+    own: bool = False  # announced as its own gateway (its own update_topo), not in the gateway's list
     osd: dict[str, Any] = field(default_factory=dict)
     osd_at: float | None = None
     osd_count: int = 0
@@ -529,7 +530,7 @@ class MonitorState:
     def topics(self) -> list[str]:
         gw = self.gateway_sn
         return [
-            f"sys/product/{gw}/status",
+            "sys/product/+/status",  # the gateway's, and those of devices announced as gateways of their own
             f"thing/product/{gw}/events",
             f"thing/product/{gw}/events_reply",
             f"thing/product/{gw}/services",
@@ -555,6 +556,8 @@ class MonitorState:
         data = body.get("data") if isinstance(body.get("data"), dict) else {}
         if kind in ("osd", "state") and not self._ours(sn, body):
             return []
+        if kind == "status" and sn != self.gateway_sn and sn not in self.devices:
+            return []  # another gateway's, or one of ours whose osd has not been seen yet
         self.messages += 1
         self.last_at = now
         handler = getattr(self, "_" + kind.replace("/", "_"), None)
@@ -588,11 +591,17 @@ class MonitorState:
         if body.get("method") != "update_topo":
             return []
         subs = data.get("sub_devices") or []
+        listed = {d.get("sn") for d in subs}
+        if sn != self.gateway_sn:  # a device that is its own gateway: it lists itself while it is online
+            view = self.devices.setdefault(sn, DeviceView(sn))
+            view.own, view.online = True, sn in listed
+            view.domain = str(data.get("domain", view.domain))
+            return [f"{_clock()} topo   {sn}: {'online' if view.online else 'offline'} (its own gateway)"]
         self.topology_at, self.topology_source = now, ""
         self.gateway_online = True
-        listed = {d.get("sn") for d in subs}
         for view in self.devices.values():
-            view.online = view.sn in listed
+            if not view.own:
+                view.online = view.sn in listed
         for d in subs:
             view = self.devices.setdefault(str(d.get("sn")), DeviceView(str(d.get("sn"))))
             view.domain, view.online = str(d.get("domain", "?")), True
