@@ -11,6 +11,7 @@ import pytest
 
 from adapters.errors import DeviceError
 from adapters.osdk.mission import AUTO_TAKEOFF, WAYLINE, mode_code
+from adapters.osdk.wayline import OsdkWayline
 from schemas import TopicKind, default_registry
 from tests.test_osdk_preflight import World, _north, _takeoff
 
@@ -84,3 +85,58 @@ def test_a_take_off_interrupted_by_a_stop_ends_with_cancel_and_task_finish(world
     world.run(5.0)  # nothing after task_finish
     assert [e["status"] for e in world.events("takeoff_to_point_progress")] == statuses
     assert world.adapter.mode_code() != AUTO_TAKEOFF
+
+
+def _fly_to(target: tuple[float, float], height: float, fly_to_id: str = "f1") -> Any:
+    from schemas.services import FlyToPoint
+
+    return FlyToPoint.model_validate(
+        {"fly_to_id": fly_to_id, "max_speed": 10, "points": [{"latitude": target[0], "longitude": target[1],
+                                                               "height": height}]}
+    )  # fmt: skip
+
+
+def _airborne(world: World) -> float:
+    """Take off to 40 m above a point 5 m north and wait for the task's end: the home's WGS84 height."""
+    target = _north(world.model, 5.0)
+    home = world.adapter.telemetry.home_altitude
+    assert home is not None
+    result = world.call(lambda: world.adapter.call("takeoff_to_point", _takeoff(target, height=home + 40.0)))
+    assert not isinstance(result, DeviceError), result
+    world.run(90.0, until=lambda: _finished(world))
+    assert _finished(world)
+    return float(home)
+
+
+@pytest.mark.parametrize("interruption", ["stop", "go_home"])
+def test_a_fly_to_interrupted_ends_with_one_terminal_status(world: World, interruption: str) -> None:
+    """Issue #38: fly_to_point_progress in every path: stopped by an emergency stop (DRC's, the console's) or
+    by the FC's go home (return_home) mid-flight, it ends with one terminal status, then silence."""
+    home = _airborne(world)
+    target = _north(world.model, 300.0)
+    result = world.call(lambda: world.adapter.call("fly_to_point", _fly_to(target, home + 40.0)))
+    assert not isinstance(result, DeviceError), result
+    world.run(20.0, until=lambda: world.model.speed > 5.0)
+    if interruption == "stop":
+        world.call(world.adapter.stop_motion)
+    else:
+        assert world.call(lambda: OsdkWayline(world.adapter).go_home("rth-1")) is None  # return_home's path
+    world.run(3.0)
+    statuses = [e["status"] for e in world.events("fly_to_point_progress")]
+    terminal = [s for s in statuses if s in ("wayline_ok", "wayline_failed", "wayline_cancel")]
+    assert terminal == ["wayline_cancel"], statuses
+    world.run(5.0)
+    assert [e["status"] for e in world.events("fly_to_point_progress")] == statuses  # nothing after it
+
+
+def test_a_take_off_interrupted_by_return_home_ends_with_cancel_and_task_finish(world: World) -> None:
+    """return_home mid-climb (the wayline service's path: the task stopped, then the FC's go home)."""
+    target = _north(world.model, 60.0)
+    result = world.call(lambda: world.adapter.call("takeoff_to_point", _takeoff(target, height=75.0)))
+    assert not isinstance(result, DeviceError), result
+    world.run(60.0, until=lambda: world.model.u > 8.0)
+    assert world.call(lambda: OsdkWayline(world.adapter).go_home("rth-1")) is None  # return_home's path
+    world.run(3.0)
+    statuses = [e["status"] for e in world.events("takeoff_to_point_progress")]
+    assert statuses[-2:] == ["wayline_cancel", "task_finish"], statuses
+    assert statuses.count("task_finish") == 1
