@@ -67,7 +67,8 @@ def sim() -> Iterator[dict[str, Any]]:
     cloud = TimedCloud(broker.host, broker.port, GW)
     proc, _ = simulated_gateway(broker.url, **env)
     try:
-        cloud.wait_for("status", lambda b: len(b["data"]["sub_devices"]) == 3, timeout=15)
+        # the dock lists the aircraft and the gimbal; the robot announces itself (docs/cloud-api.md)
+        cloud.wait_for(f"{GW}/status", lambda b: len(b["data"]["sub_devices"]) == 2, timeout=15)
         yield {"cloud": cloud, "broker": broker, "proc": proc}
     finally:
         cloud.close()

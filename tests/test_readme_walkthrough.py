@@ -325,7 +325,8 @@ def _check_what_the_reader_saw(
     # clears when a heartbeat comes back, and fires again when the block's heartbeats end), so the
     # check is made on the task's progress events, whose content never repeats
     events = [ln.split("event  ", 1)[1] for ln in view if "event  " in ln]
-    answered = [e for e in events if not e.startswith("drc_status_notify ")]
+    # (the robot's x_robomaster_hurt events repeat by nature: the simulated match hits armours 0-3 in turn)
+    answered = [e for e in events if e.startswith("takeoff_to_point_progress ")]
     assert answered and len(answered) == len(set(answered)), "\n".join(events)
 
 
