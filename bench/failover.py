@@ -12,7 +12,11 @@ acted once per request. Target (issue #19): answered again within 10 s, 20 of 20
 
 from __future__ import annotations
 
+import contextlib
 import json
+import math
+import os
+import random
 import statistics
 import threading
 import time
@@ -25,9 +29,11 @@ from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 
 from adapters.rsdk.sim import GimbalCanSim
 from bench.run import Config, Row
+from gateway.local_broker import LocalBroker
 from gateway.mqtt import close_client
 from tests.nats_cluster import NatsCluster, nats_version
-from tests.support import GatewayThread, gateway_settings, wait_until
+from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
+from tests.test_liveness import DeafProxy
 
 GW = "GW-CLUSTER-1"
 PI = "20-0-0"
@@ -87,6 +93,84 @@ class Cloud:
         close_client(self.client)
 
 
+class ClusterProbe:
+    """When the cluster itself serves MQTT sessions again, measured without the gateway: on every
+    surviving node, a new attempt every ``period`` s (up to ``timeout`` s each, so attempts overlap):
+    CONNECT with a persistent session (``clean_session = false``, as the gateway's), SUBSCRIBE QoS 1 to
+    a topic of its own, PUBLISH QoS 1 to it, and the message back. ``ready_at`` is when the first round
+    trip completed. The client ids come from a small pool per node (sessions are kept, not piled up)."""
+
+    def __init__(
+        self, host: str, ports: list[int], *, period: float = 0.05, timeout: float = 1.0, clean: bool = False
+    ) -> None:
+        self.host, self.ports, self.period, self.timeout = host, ports, period, timeout
+        # clean: a clean session subscribing at QoS 0 (NATS serves it without a JetStream consumer) and
+        # publishing at QoS 1: what a gateway without a persistent session would see
+        self.clean = clean
+        self.ready_at: float | None = None
+        self.ready_port: int | None = None
+        self.attempts = 0
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._threads: list[threading.Thread] = []
+
+    def start(self) -> ClusterProbe:
+        for port in self.ports:
+            t = threading.Thread(target=self._node, args=(port,), daemon=True, name=f"cluster-probe-{port}")
+            t.start()
+            self._threads.append(t)
+        return self
+
+    def _node(self, port: int) -> None:
+        pool = max(2, int(self.timeout / self.period) + 2)
+        n = 0
+        while not self._stop.is_set() and self.ready_at is None:
+            kind = "clean" if self.clean else "kept"
+            cid = f"clprobe-{kind}-{port}-{n % pool}"  # the same ids every round: sessions are reused
+            n += 1
+            threading.Thread(target=self._attempt, args=(port, cid), daemon=True).start()
+            self._stop.wait(self.period)
+
+    def _attempt(self, port: int, cid: str) -> None:
+        with self._lock:
+            self.attempts += 1
+        back = threading.Event()
+        nonce = uuid.uuid4().hex.encode()
+        topic = f"djigw/clprobe/{cid}"
+        client = paho.Client(CallbackAPIVersion.VERSION2, client_id=cid,
+                             protocol=MQTTProtocolVersion.MQTTv311, clean_session=self.clean)  # fmt: skip
+        sub_qos = 0 if self.clean else 1
+        client.on_connect = lambda c, u, f, rc, p: None if rc.is_failure else c.subscribe(topic, qos=sub_qos)
+        client.on_subscribe = lambda c, u, mid, rcs, p: c.publish(topic, nonce, qos=1)
+        client.on_message = lambda c, u, m: back.set() if m.payload == nonce else None
+        try:
+            client.connect(self.host, port, keepalive=10)
+            client.loop_start()
+            if back.wait(self.timeout):
+                now = time.monotonic()
+                with self._lock:
+                    if self.ready_at is None:
+                        self.ready_at, self.ready_port = now, port
+        except OSError:
+            pass
+        finally:
+            with contextlib.suppress(Exception):
+                client.disconnect()
+            client.loop_stop()
+            close_client(client)
+
+    def wait(self, timeout: float) -> float | None:
+        deadline = time.monotonic() + timeout
+        while self.ready_at is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        return self.ready_at
+
+    def stop(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(2)
+
+
 @dataclass(frozen=True, slots=True)
 class Failover:
     victim: int
@@ -96,6 +180,22 @@ class Failover:
     after: int  # answered after the kill
     redelivered: int  # replies the broker delivered twice (same bytes)
     node: int  # the node the gateway moved to
+    cluster_ready: float  # kill → the cluster served a persistent session a QoS 1 round trip (ClusterProbe)
+    gateway_answer: float  # kill → the gateway published its reply to the first request sent after the kill
+    clean_ready: float  # kill → a clean session (QoS 0 subscription) made a round trip (ClusterProbe)
+    proven: float  # kill → the gateway's link on a surviving node proved it receives (its probe came back)
+
+    @property
+    def link_share(self) -> float:
+        """The part the gateway's link controls: from the cluster serving sessions again to the gateway
+        connected to a survivor and hearing its own probe (negative: before the cluster probe did)."""
+        return self.proven - self.cluster_ready
+
+    @property
+    def gateway_share(self) -> float:
+        """The gateway's own part: from the cluster serving sessions again to the gateway's first answer
+        (negative: the gateway's session and node worked before the probe's did)."""
+        return self.gateway_answer - self.cluster_ready
 
 
 def measure_round(cluster: NatsCluster, victim: int) -> Failover:
@@ -115,7 +215,12 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
     cloud = Cloud(cluster.host, cluster.mqtt_ports[2])
     gw = GatewayThread(settings).start()
     sent: dict[str, float] = {}
+    published: dict[str, float] = {}  # tid → when the gateway handed its reply to the broker connection
     stop = threading.Event()
+
+    def on_published(topic: str, payload: bytes) -> None:
+        if topic.endswith("/services_reply"):
+            published.setdefault(json.loads(payload)["tid"], time.monotonic())
 
     def traffic() -> None:
         n = 0
@@ -126,18 +231,35 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
             cloud.request(tid)
 
     sender = threading.Thread(target=traffic, daemon=True)
+    probe: ClusterProbe | None = None
+    clean: ClusterProbe | None = None
     try:
         wait_until(lambda: gw.app.devices.by_sn("RSDK-CL-1").online, 10, what="gimbal online")
+        gw.app.published.append(on_published)  # the console's hook: what the gateway published, when
         if gw.app.bridge.current.port != cluster.mqtt_ports[victim]:
             raise AssertionError("the gateway did not start on the first url")
         sender.start()
         wait_until(lambda: len(cloud.answered()) >= 20, 30, what="20 answers before the kill")
         killed_at = time.monotonic()
         cluster.kill(victim)
+        survivors = [p for i, p in enumerate(cluster.mqtt_ports) if i != victim]
+        probe = ClusterProbe(cluster.host, survivors).start()
+        clean = ClusterProbe(cluster.host, survivors, clean=True).start()
         bridge = gw.app.bridge
         wait_until(lambda: bridge.connected and bridge.current.port != cluster.mqtt_ports[victim], 20,
                    interval=0.005, what="the gateway on another node")  # fmt: skip
         reconnected = time.monotonic() - killed_at
+
+        def proven_on_survivor() -> float | None:
+            proof = bridge.liveness.last_proof
+            on_survivor = bridge.connected and bridge.current.port != cluster.mqtt_ports[victim]
+            return (
+                proof
+                if proof is not None and proof > killed_at + reconnected - 0.01 and on_survivor
+                else None
+            )
+
+        proven_at = wait_until(proven_on_survivor, 30, interval=0.005, what="the link proven on a survivor")
 
         def after() -> list[str]:
             done = cloud.answered()
@@ -149,6 +271,14 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
         )
         wait_until(after, 30, what="a request sent after the kill answered")
         first_answer = min(cloud.reply_times[t] for t in after()) - killed_at
+        gateway_answer = (
+            min(at for t, at in list(published.items()) if sent.get(t, 0.0) > killed_at) - killed_at
+        )
+        ready_at, clean_at = probe.wait(30), clean.wait(30)
+        probe.stop()
+        clean.stop()
+        if ready_at is None or clean_at is None:
+            raise AssertionError("the cluster probe never completed a round trip")
         wait_until(lambda: len(after()) >= 20, 30, what="20 requests answered after the failover")
         stop.set()
         sender.join(2)
@@ -162,9 +292,13 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
             raise AssertionError(f"{sim.model.photos} photos for {len(sent)} requests")
         node = cluster.mqtt_ports.index(bridge.current.port)
         return Failover(victim, reconnected, first_answer, len(sent), len(after()),
-                        sum(len(r) - 1 for r in replies.values()), node)  # fmt: skip
+                        sum(len(r) - 1 for r in replies.values()), node, ready_at - killed_at,
+                        gateway_answer, clean_at - killed_at, proven_at - killed_at)  # fmt: skip
     finally:
         stop.set()
+        for p in (probe, clean):
+            if p is not None:
+                p.stop()
         gw.stop()
         cloud.close()
         sim.stop()
@@ -172,29 +306,121 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
         cluster.wait_ready([victim])
 
 
+@dataclass(frozen=True, slots=True)
+class DeafRound:
+    detected: float  # the proxy starts dropping every PUBLISH to the gateway → the bridge says deaf (s)
+    recovered: float  # … → on the next url, a request answered (s)
+
+
+def deaf_round(broker: LocalBroker) -> DeafRound:
+    """The gateway's first url is a proxy that acknowledges subscriptions and delivers nothing once told
+    (``tests/test_liveness.py``'s ``DeafProxy``), the second mosquitto itself; default liveness settings
+    (probe every 5 s jittered ½–1×, 3 s deadline). The proxy goes deaf at a random point of the probe
+    cycle (1–5 s after the link was proven)."""
+    channel = f"djigw-deaf-{uuid.uuid4().hex[:8]}"
+    sim = GimbalCanSim(interface="virtual", channel=channel).start()
+    proxy = DeafProxy((broker.host, broker.port))
+    device = {"type": "rsdk", "sn": "RSDK-DEAF-B", "interface": "virtual", "channel": channel}
+    settings = gateway_settings(broker.port, [device], gateway_sn="GW-DEAF-B",
+                                dispatcher={"require_authority": False},
+                                broker={"url": [f"mqtt://127.0.0.1:{proxy.port}", broker.url]})  # fmt: skip
+    gw = GatewayThread(settings).start()
+    cloud = CloudClient(broker.host, broker.port, "GW-DEAF-B")
+    try:
+        assert gw.app is not None and gw.app.bridge is not None
+        bridge = gw.app.bridge
+        wait_until(lambda: bridge.liveness.state.value == "live", 10, what="the first probe back")
+        time.sleep(random.uniform(1.0, 5.0))
+        proxy.deaf.set()
+        started = time.monotonic()
+        wait_until(lambda: bridge.deaf, 20, interval=0.005, what="deaf")
+        detected = time.monotonic() - started
+
+        def answered() -> bool:
+            if not (bridge.current is not None and bridge.current.port == broker.port and bridge.subscribed):
+                return False
+            reply = cloud.service("x_rsdk_version_get", {"payload_index": PI}, timeout=2.0)
+            return bool(reply["data"]["result"] == 0)
+
+        wait_until(answered, 30, interval=0.01, what="answered on the next url")
+        return DeafRound(detected, time.monotonic() - started)
+    finally:
+        cloud.close()
+        gw.stop()
+        sim.stop()
+        proxy.close()
+
+
+def _p95(values: list[float]) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, math.ceil(0.95 * len(ordered)) - 1)]
+
+
 def run(cfg: Config) -> list[Row]:
-    rounds = 1 if cfg.quick else 6
+    rounds = 1 if cfg.quick else int(os.environ.get("DJIGW_FAILOVER_ROUNDS", "20"))
     results: list[Failover] = []
-    with NatsCluster() as cluster:
+    mqtt_extra = os.environ.get("DJIGW_FAILOVER_NATS_MQTT", "")  # e.g. "consumer_memory_storage: true"
+    with NatsCluster(mqtt_extra=mqtt_extra) as cluster:
         for k in range(rounds):
             results.append(measure_round(cluster, k % 2))
             r = results[-1]
-            line = (f"  .. failover: kill node {r.victim + 1}: on node {r.node + 1} after "
-                    f"{r.reconnected:.2f} s, answered again after {r.first_answer:.2f} s")  # fmt: skip
+            line = (f"  .. failover {k + 1}/{rounds}: kill node {r.victim + 1}: cluster serves again after "
+                    f"{r.cluster_ready:.2f} s, gateway on node {r.node + 1} after {r.reconnected:.2f} s, "
+                    f"its link proven after {r.proven:.2f} s ({r.link_share:+.2f} s), "
+                    f"gateway answered after {r.gateway_answer:.2f} s (share {r.gateway_share:+.2f} s), "
+                    f"the cloud had it after {r.first_answer:.2f} s, "
+                    f"{r.after} answered after; a clean session after {r.clean_ready:.2f} s")  # fmt: skip
             print(line, flush=True)
+    deaf_rounds = 1 if cfg.quick else int(os.environ.get("DJIGW_DEAF_ROUNDS", "10"))
+    deafs: list[DeafRound] = []
+    broker = LocalBroker().start()
+    try:
+        for k in range(deaf_rounds):
+            deafs.append(deaf_round(broker))
+            print(f"  .. deaf link {k + 1}/{deaf_rounds}: deaf after {deafs[-1].detected:.2f} s, "
+                  f"answering on the next url after {deafs[-1].recovered:.2f} s", flush=True)  # fmt: skip
+    finally:
+        broker.stop()
+    detect = [d.detected for d in deafs]
+    recover = [d.recovered for d in deafs]
     firsts = [r.first_answer for r in results]
+    ready = [r.cluster_ready for r in results]
+    shares = [r.gateway_share for r in results]
+    links = [r.link_share for r in results]
     recon = [r.reconnected for r in results]
-    note = (f"nats-server {nats_version()}, 3 nodes; per round: answered again "
-            + ", ".join(f"{x:.1f}" for x in firsts) + " s; "
+    cleans = [r.clean_ready for r in results]
+    nodes = f"3 nodes (mqtt: {mqtt_extra})" if mqtt_extra else "3 nodes"
+    note = (f"nats-server {nats_version()}, {nodes}; per round (cluster / gateway answered, s): "
+            + ", ".join(f"{r.cluster_ready:.1f}/{r.gateway_answer:.1f}" for r in results) + "; "
             f"{sum(r.requests for r in results)} requests, all answered, each acted on once; "
             f"{sum(r.redelivered for r in results)} replies delivered twice (same bytes)")  # fmt: skip
+    deaf_rows = [
+        Row(group="deaf link", case="acks subscriptions, delivers nothing: found deaf (median)",
+            count=len(detect), rate=statistics.median(detect), unit="s",
+            note=f"max {max(detect):.2f} s; probe every 5 s (½–1×), 3 s deadline, 1-5 s after a proof"),
+        Row(group="deaf link", case="... answering again on the next url (median; bound 15 s)",
+            count=len(recover), rate=statistics.median(recover), unit="s", note=f"max {max(recover):.2f} s"),
+    ]  # fmt: skip
     return [
+        *deaf_rows,
+        Row(group="failover", case="node kills (each: every request answered once, >= 20 after)",
+            count=len(results), rate=float(min(r.after for r in results)), unit="req",
+            note=f"fewest answered after a kill: {min(r.after for r in results)}"),
+        Row(group="failover", case="broker share: the cluster serves persistent sessions again (median)",
+            count=len(ready), rate=statistics.median(ready), unit="s",
+            note=f"min {min(ready):.2f}, p95 {_p95(ready):.2f}, max {max(ready):.2f} s"),
+        Row(group="failover", case="a clean session (QoS 0 subscription) makes a round trip again (median)",
+            count=len(cleans), rate=statistics.median(cleans), unit="s",
+            note=f"p95 {_p95(cleans):.2f}, max {max(cleans):.2f} s"),
+        Row(group="failover", case="gateway share: first answer after the cluster serves again (p95; <= 1 s)",
+            count=len(shares), rate=_p95(shares), unit="s",
+            note=f"median {statistics.median(shares):.2f}, min {min(shares):.2f}, max {max(shares):.2f} s"),
+        Row(group="failover", case="link share: the gateway proven on a survivor after the cluster (p95)",
+            count=len(links), rate=_p95(links), unit="s",
+            note=f"median {statistics.median(links):.2f}, min {min(links):.2f}, max {max(links):.2f} s"),
+        Row(group="failover", case="the cloud has an answer again after the kill (median)",
+            count=len(firsts), rate=statistics.median(firsts), unit="s",
+            note=f"max {max(firsts):.2f} s; " + note),
         Row(group="failover", case="gateway on another node after its node's SIGKILL (median)",
             count=len(recon), rate=statistics.median(recon), unit="s", note=f"max {max(recon):.2f} s"),
-        Row(group="failover", case="services answered again after the kill (median; target <= 10 s)",
-            count=len(firsts), rate=statistics.median(firsts), unit="s", note=note),
-        Row(group="failover", case="services answered again after the kill (worst)", count=len(firsts),
-            rate=max(firsts), unit="s"),
-        Row(group="failover", case="requests answered after the failover (each round >= 20)",
-            count=len(results), rate=float(min(r.after for r in results)), unit="req"),
     ]  # fmt: skip

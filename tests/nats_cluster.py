@@ -49,7 +49,9 @@ class NatsCluster:
 
     NODES = 3
 
-    def __init__(self, workdir: Path | None = None) -> None:
+    def __init__(self, workdir: Path | None = None, *, mqtt_extra: str = "") -> None:
+        """``mqtt_extra``: more settings inside each node's ``mqtt { … }`` block (e.g.
+        ``consumer_memory_storage: true``; ``bench/failover.py`` compares them)."""
         self.host = "127.0.0.1"
         self.dir = Path(workdir) if workdir else Path(tempfile.mkdtemp(prefix="djigw-nats-"))
         self.client_ports = [free_port() for _ in range(self.NODES)]
@@ -68,7 +70,7 @@ class NatsCluster:
                         f"jetstream {{ store_dir: {store}, max_memory_store: 64MB, max_file_store: 512MB }}",
                         f"cluster {{ name: djigw-test, listen: {self.host}:{self.cluster_ports[i]}, "
                         f"routes: [{routes}] }}",
-                        f"mqtt {{ listen: {self.host}:{self.mqtt_ports[i]} }}",
+                        f"mqtt {{ listen: {self.host}:{self.mqtt_ports[i]} {mqtt_extra} }}",
                         "",
                     ]
                 )
