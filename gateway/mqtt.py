@@ -3,7 +3,10 @@
 Received messages are handed to the asyncio loop with ``call_soon_threadsafe`` and land in a
 bounded queue; when it is full the message is dropped, counted and logged, so a flood never
 blocks paho's thread (a blocked thread would delay every heartbeat and reply). Subscriptions are
-made in the connect callback every time, so a broker restart that forgot them is healed. The
+made in the connect callback, so a broker restart that forgot them is healed; when the CONNACK says the
+broker kept the session this bridge already subscribed on, they are not made again (on NATS each costs a
+JetStream request that blocks the connection while a leader is elected): the liveness probe proves the
+kept subscriptions work, and a deaf link resubscribes. The
 ``on_connected`` hook (``update_topo``, ``state``) runs in the loop after each (re)connect.
 
 Threads: one *supervisor* per bridge (``mqtt-<name>``) finds a broker node and connects (TCP probes
@@ -304,6 +307,7 @@ class MqttBridge:
         self._recent: deque[tuple[float, str, bytes]] = deque(maxlen=max(1, settings.telemetry_buffer))
         self._drops_counted = (0, 0)
         self._subscribed = threading.Event()  # set once the broker acknowledged every subscription
+        self._subscribed_once = False  # this bridge's subscriptions were acknowledged on its session once
         self._sub_mid: int | None = None
         self._dropped_logged = 0
         self.last_refusal: str | None = None  # the broker's reason for refusing the last CONNECT
@@ -837,18 +841,30 @@ class MqttBridge:
             log.info("broker reachable again after %.1f s", self._clock() - self._failing_since)
             self._failing_since = None
         self._subscribed.clear()
-        if self.subscriptions:
+        # the broker kept this session and we subscribed on it before (this process, these topics): its
+        # subscriptions are there, and subscribing again only costs (NATS creates, or looks up, a JetStream
+        # consumer per topic through its metadata leader, and holds the connection up to 4 s per topic
+        # while that leader is being elected). The liveness probe proves it; deaf → resubscribe
+        present = bool(getattr(flags, "session_present", False))
+        kept = present and self._subscribed_once and self.liveness.enabled
+        if self.subscriptions and not kept:
             _, self._sub_mid = client.subscribe(self._subscription_list())
         self._metrics.inc("mqtt_connects_total", link=self._name)
         self._metrics.set("mqtt_connected", 1, link=self._name)
         if not self.policy.takeover_suspected:
             self._metrics.set("mqtt_client_id_conflict", 0, link=self._name)
         log.info(
-            "connected to %s (%s), subscribed to %d topics",
+            "connected to %s (%s), %s %d topics",
             self._where(),
             self._name,
+            "its session kept (no resubscribe):" if kept else "subscribed to",
             len(self.subscriptions),
         )
+        if kept:
+            with self._probe_lock:
+                if self.liveness.enabled:
+                    self.liveness.subscribed(self._clock())
+            self._subscribed.set()
         self._connack.set()
         with contextlib.suppress(RuntimeError):  # the loop closed during shutdown
             self._loop.call_soon_threadsafe(self._after_connect)
@@ -880,6 +896,7 @@ class MqttBridge:
                     )
                 else:
                     self.liveness.subscribed(self._clock())
+        self._subscribed_once = not refused  # a refused topic is asked for again on every connect
         self._subscribed.set()
 
     @property
