@@ -173,12 +173,12 @@ class ClusterProbe:
 
 
 class ConsumerWatch:
-    """When what the gateway's requests need from JetStream has a leader again: the streams of messages and
-    sessions, and the consumer behind the gateway's request subscription (``…/services``: NATS keeps one
-    durable consumer per MQTT subscription filter per session, each its own Raft group). The broker's share
-    for *this* gateway, which a probe session (its own consumers, elsewhere) does not show. Asked over the
-    NATS protocol (``$JS.API.STREAM.INFO`` / ``CONSUMER.INFO``, answered by the leader) on the surviving
-    nodes every 50 ms (each request waits up to 0.25 s)."""
+    """When what the gateway's requests need from JetStream has a leader again: the metadata, the streams
+    of messages and sessions, and the consumer behind the gateway's request subscription (``…/services``:
+    NATS keeps one durable consumer per MQTT subscription filter per session, each its own Raft group).
+    The broker's share for *this* gateway, which a probe session (its own consumers, elsewhere) does not
+    show. Asked over the NATS protocol (``$JS.API.INFO``, ``STREAM.INFO``, ``CONSUMER.INFO``, answered by
+    the leader) on the surviving nodes every 50 ms (each request waits up to 0.25 s)."""
 
     STREAM = "$MQTT_msgs"
 
@@ -221,23 +221,27 @@ class ConsumerWatch:
         return self
 
     async def _watch(self) -> None:
-        """Until each has a leader answering: the request consumer, and the two streams the gateway needs
-        (``$MQTT_msgs``: every QoS 1 message; ``$MQTT_sess``: sessions, read on CONNECT)."""
+        """Until each has a leader answering: the request consumer, the two streams the gateway needs
+        (``$MQTT_msgs``: every QoS 1 message; ``$MQTT_sess``: sessions, read on CONNECT) and the
+        JetStream metadata (a CONNECT restoring a session looks its consumers up there)."""
         nc = await self._connect()
         try:
             jsm = nc.jsm()
-            waiting = {("consumer", name) for name in self.names} | {("stream", "$MQTT_msgs"),
-                                                                      ("stream", "$MQTT_sess")}  # fmt: skip
+            waiting = {("consumer", name) for name in self.names} | {
+                ("stream", "$MQTT_msgs"), ("stream", "$MQTT_sess"), ("meta", "meta")}  # fmt: skip
             while waiting and not self._stop.is_set():
                 for kind, name in sorted(waiting):
                     try:
                         if kind == "consumer":
                             info: Any = await jsm.consumer_info(self.STREAM, name, timeout=0.25)
-                        else:
+                        elif kind == "stream":
                             info = await asyncio.wait_for(jsm.stream_info(name), 0.25)
+                        else:  # the metadata leader answers the account's JetStream info
+                            await asyncio.wait_for(jsm.account_info(), 0.25)
+                            info = None
                     except Exception:  # no leader yet (timeout), or the API not answering
                         continue
-                    if info.cluster is not None and info.cluster.leader:
+                    if info is None or (info.cluster is not None and info.cluster.leader):
                         waiting.discard((kind, name))
                         self.ready[name] = time.monotonic()
                 if waiting:
@@ -467,7 +471,7 @@ def run(cfg: Config) -> list[Row]:
             results.append(measure_round(cluster, k % 2))
             r = results[-1]
             line = (f"  .. failover {k + 1}/{rounds}: kill node {r.victim + 1}: cluster serves again after "
-                    f"{r.cluster_ready:.2f} s, its consumer + streams after {r.consumer_ready:.2f} s, "
+                    f"{r.cluster_ready:.2f} s, its JetStream leaders after {r.consumer_ready:.2f} s, "
                     f"gateway on node {r.node + 1} after {r.reconnected:.2f} s, "
                     f"its link proven after {r.proven:.2f} s ({r.link_share:+.2f} s), "
                     f"gateway answered after {r.gateway_answer:.2f} s (share {r.gateway_share:+.2f} s), "
@@ -516,7 +520,7 @@ def run(cfg: Config) -> list[Row]:
         Row(group="failover", case="the cluster serves persistent sessions again (probe client; median)",
             count=len(ready), rate=statistics.median(ready), unit="s",
             note=f"min {min(ready):.2f}, p95 {_p95(ready):.2f}, max {max(ready):.2f} s"),
-        Row(group="failover", case="broker share: its request consumer, msgs and sess streams have leaders",
+        Row(group="failover", case="broker share: meta, msgs+sess streams, its request consumer have leaders",
             count=len(brokers), rate=statistics.median(brokers), unit="s",
             note=f"median; min {min(brokers):.2f}, p95 {_p95(brokers):.2f}, max {max(brokers):.2f} s"),
         Row(group="failover", case="a clean session (QoS 0 subscription) makes a round trip again (median)",
