@@ -276,6 +276,7 @@ class Failover:
     clean_ready: float  # kill → a clean session (QoS 0 subscription) made a round trip (ClusterProbe)
     proven: float  # kill → the gateway's link on a surviving node proved it receives (its probe came back)
     consumer_ready: float  # kill → its request consumer and the MQTT streams have leaders (ConsumerWatch)
+    fresh_answer: float  # kill → the gateway answered a request a new client published once they had
 
     @property
     def broker_ready(self) -> float:
@@ -284,9 +285,11 @@ class Failover:
 
     @property
     def gateway_share(self) -> float:
-        """The gateway's own part: from the broker serving this gateway again (sessions and its request
-        consumer) to the gateway's first answer (negative: it was served before a probe session was)."""
-        return self.gateway_answer - self.broker_ready
+        """The gateway's own part: from the broker being ready for this gateway again (its JetStream
+        leaders) to the gateway answering a request published at that moment by a new client (the bench
+        cloud's own connection can be held up by NATS for seconds more: its QoS 1 publishes wait 4 s each
+        for a leader, one after the other)."""
+        return self.fresh_answer - self.broker_ready
 
     @property
     def link_share(self) -> float:
@@ -342,10 +345,18 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
                               f"thing/product/{GW}/services")  # fmt: skip
         if len(watch.find()) != 1:
             raise AssertionError(f"the gateway's request consumer: {watch.names}")
+        survivors = [p for i, p in enumerate(cluster.mqtt_ports) if i != victim]
         killed_at = time.monotonic()
         cluster.kill(victim)
         watch.start()
-        survivors = [p for i, p in enumerate(cluster.mqtt_ports) if i != victim]
+        fresh_tid = f"fresh-{uuid.uuid4().hex[:8]}"
+
+        def fresh() -> None:  # the moment the broker is ready for this gateway, a new client asks it
+            if watch.wait(30) is not None:
+                _publish_once(cluster.host, survivors, fresh_tid)
+
+        fresher = threading.Thread(target=fresh, daemon=True)
+        fresher.start()
         probe = ClusterProbe(cluster.host, survivors).start()
         clean = ClusterProbe(cluster.host, survivors, clean=True).start()
         bridge = gw.app.bridge
@@ -378,6 +389,8 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
             min(at for t, at in list(published.items()) if sent.get(t, 0.0) > killed_at) - killed_at
         )
         ready_at, clean_at, consumer_at = probe.wait(30), clean.wait(30), watch.wait(30)
+        fresher.join(35)
+        fresh_at = wait_until(lambda: published.get(fresh_tid), 30, interval=0.002, what="the fresh request")
         probe.stop()
         clean.stop()
         if ready_at is None or clean_at is None or consumer_at is None:
@@ -397,7 +410,7 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
         return Failover(victim, reconnected, first_answer, len(sent), len(after()),
                         sum(len(r) - 1 for r in replies.values()), node, ready_at - killed_at,
                         gateway_answer, clean_at - killed_at, proven_at - killed_at,
-                        consumer_at - killed_at)  # fmt: skip
+                        consumer_at - killed_at, fresh_at - killed_at)  # fmt: skip
     finally:
         stop.set()
         for p in (probe, clean):
@@ -410,6 +423,33 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
         sim.stop()
         cluster.start_node(victim)
         cluster.wait_ready([victim])
+
+
+def _publish_once(host: str, ports: list[int], tid: str) -> float:
+    """A new client (clean session) publishes one request (QoS 1) on the first survivor that takes it;
+    when it was handed to the broker (PUBACK)."""
+    body = {"tid": tid, "bid": "b", "timestamp": 0, "method": "x_rsdk_version_get",
+            "data": {"payload_index": PI}}  # fmt: skip
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        for port in ports:
+            client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"fresh-{uuid.uuid4().hex[:8]}",
+                                 protocol=MQTTProtocolVersion.MQTTv311, clean_session=True)  # fmt: skip
+            try:
+                client.connect(host, port, keepalive=10)
+                client.loop_start()
+                info = client.publish(f"thing/product/{GW}/services", json.dumps(body), qos=1)
+                info.wait_for_publish(5)
+                if info.is_published():
+                    return time.monotonic()
+            except (OSError, RuntimeError, ValueError):
+                pass
+            finally:
+                with contextlib.suppress(Exception):
+                    client.disconnect()
+                client.loop_stop()
+                close_client(client)
+    raise AssertionError("no survivor took the fresh request")
 
 
 @dataclass(frozen=True, slots=True)
@@ -474,8 +514,9 @@ def run(cfg: Config) -> list[Row]:
                     f"{r.cluster_ready:.2f} s, its JetStream leaders after {r.consumer_ready:.2f} s, "
                     f"gateway on node {r.node + 1} after {r.reconnected:.2f} s, "
                     f"its link proven after {r.proven:.2f} s ({r.link_share:+.2f} s), "
-                    f"gateway answered after {r.gateway_answer:.2f} s (share {r.gateway_share:+.2f} s), "
-                    f"the cloud had it after {r.first_answer:.2f} s, "
+                    f"fresh request answered after {r.fresh_answer:.2f} s (share {r.gateway_share:+.2f} s), "
+                    f"the bench cloud's first request answered after {r.gateway_answer:.2f} s "
+                    f"(received {r.first_answer:.2f} s), "
                     f"{r.after} answered after; a clean session after {r.clean_ready:.2f} s")  # fmt: skip
             print(line, flush=True)
     deaf_rounds = 1 if cfg.quick else int(os.environ.get("DJIGW_DEAF_ROUNDS", "10"))
@@ -526,7 +567,7 @@ def run(cfg: Config) -> list[Row]:
         Row(group="failover", case="a clean session (QoS 0 subscription) makes a round trip again (median)",
             count=len(cleans), rate=statistics.median(cleans), unit="s",
             note=f"p95 {_p95(cleans):.2f}, max {max(cleans):.2f} s"),
-        Row(group="failover", case="gateway share: its first answer after the broker share (p95; <= 1 s)",
+        Row(group="failover", case="gateway share: a fresh request answered after the broker's (p95; <= 1 s)",
             count=len(shares), rate=_p95(shares), unit="s",
             note=f"median {statistics.median(shares):.2f}, min {min(shares):.2f}, max {max(shares):.2f} s"),
         Row(group="failover", case="link share: gateway proven on a survivor after the broker share (p95)",
