@@ -458,25 +458,27 @@ class DeafRound:
     recovered: float  # … → on the next url, a request answered (s)
 
 
-def deaf_round(broker: LocalBroker) -> DeafRound:
+def deaf_round(broker: LocalBroker, *, quick: bool = False) -> DeafRound:
     """The gateway's first url is a proxy that acknowledges subscriptions and delivers nothing once told
     (``tests/test_liveness.py``'s ``DeafProxy``), the second mosquitto itself; default liveness settings
     (probe every 5 s jittered ½–1×, 3 s deadline). The proxy goes deaf at a random point of the probe
-    cycle (1–5 s after the link was proven)."""
+    cycle (1–5 s after the link was proven). ``quick`` (the smoke test): a probe every 1 s, 1 s deadline."""
     channel = f"djigw-deaf-{uuid.uuid4().hex[:8]}"
     sim = GimbalCanSim(interface="virtual", channel=channel).start()
     proxy = DeafProxy((broker.host, broker.port))
     device = {"type": "rsdk", "sn": "RSDK-DEAF-B", "interface": "virtual", "channel": channel}
+    link: dict[str, Any] = {"url": [f"mqtt://127.0.0.1:{proxy.port}", broker.url]}
+    if quick:
+        link |= {"liveness_interval": 1.0, "liveness_timeout": 1.0}
     settings = gateway_settings(broker.port, [device], gateway_sn="GW-DEAF-B",
-                                dispatcher={"require_authority": False},
-                                broker={"url": [f"mqtt://127.0.0.1:{proxy.port}", broker.url]})  # fmt: skip
+                                dispatcher={"require_authority": False}, broker=link)  # fmt: skip
     gw = GatewayThread(settings).start()
     cloud = CloudClient(broker.host, broker.port, "GW-DEAF-B")
     try:
         assert gw.app is not None and gw.app.bridge is not None
         bridge = gw.app.bridge
         wait_until(lambda: bridge.liveness.state.value == "live", 10, what="the first probe back")
-        time.sleep(random.uniform(1.0, 5.0))
+        time.sleep(random.uniform(0.2, 1.0) if quick else random.uniform(1.0, 5.0))
         proxy.deaf.set()
         started = time.monotonic()
         wait_until(lambda: bridge.deaf, 20, interval=0.005, what="deaf")
@@ -524,7 +526,7 @@ def run(cfg: Config) -> list[Row]:
     broker = LocalBroker().start()
     try:
         for k in range(deaf_rounds):
-            deafs.append(deaf_round(broker))
+            deafs.append(deaf_round(broker, quick=cfg.quick))
             print(f"  .. deaf link {k + 1}/{deaf_rounds}: deaf after {deafs[-1].detected:.2f} s, "
                   f"answering on the next url after {deafs[-1].recovered:.2f} s", flush=True)  # fmt: skip
     finally:

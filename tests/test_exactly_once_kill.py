@@ -32,7 +32,7 @@ from gateway.local_broker import LocalBroker
 from tests.support import CloudClient, Proc, wait_until
 from tests.test_liveness import PUBLISH, mqtt_packets
 
-pytestmark = pytest.mark.broker
+pytestmark = [pytest.mark.broker, pytest.mark.slow]  # three processes: started first in make test
 
 GW = "GW-KILL-ONCE-1"
 SN = "RSDK-KILL-ONCE-1"
