@@ -126,6 +126,10 @@ class ReplyJournal(Protocol):
 
     def recorded_reply(self, tid: str, max_age_ms: int) -> bytes | None: ...
 
+    def request_started(self, tid: str, method: str) -> None: ...
+
+    def started_request(self, tid: str, max_age_ms: int) -> str | None: ...
+
 
 @dataclass
 class _Cached:
@@ -330,9 +334,18 @@ class Dispatcher:
                          request.method, tid)  # fmt: skip
                 self._publish_reply(stored, self._cache_open(tid), reply_to)
                 return
+            if self._started_before(request):
+                self._answer_unknown_outcome(request, reply_to)
+                return
         entry = self._cache_open(tid)
 
         started = self.clock.monotonic()
+        if self.journal is not None and audited(request.method):  # before acting (see _started_before)
+            try:
+                self.journal.request_started(tid, request.method)
+            except Exception:  # a full disk must not cost the request
+                self.metrics.inc("handler_exceptions_total", where="reply_journal")
+                log.exception("could not mark %s as started in the state store", tid)
         result, output = await self._execute(request)
         reply = reply_for(
             request, int(result), output, timestamp=self.clock.time_ms(), gateway=self._answering()
@@ -359,6 +372,50 @@ class Dispatcher:
             except Exception:  # a full disk must not cost the reply
                 self.metrics.inc("handler_exceptions_total", where="reply_journal")
                 log.exception("could not keep the reply to %s in the state store", tid)
+        self._publish_reply(raw, entry, reply_to)
+
+    def _started_before(self, request: Any) -> bool:
+        """A request with a visible effect is marked started in the store before it is acted on, and the
+        mark goes with its reply. A mark without a reply means an earlier process died between acting
+        (or starting to) and keeping the reply: whether the device acted is unknown."""
+        assert self.journal is not None
+        try:
+            method = self.journal.started_request(request.tid, int(self.settings.reply_cache_seconds * 1000))
+        except Exception:
+            self.metrics.inc("handler_exceptions_total", where="reply_journal")
+            log.exception("could not read the state store for %s", request.tid)
+            return False
+        return method is not None
+
+    def _answer_unknown_outcome(self, request: Any, reply_to: Callable[[bytes], None] | None) -> None:
+        """Answer a resend of a request an earlier process started and never answered: 399004, not acted
+        on again (the cloud reads the device's state to learn what happened). Kept like any reply."""
+        tid = request.tid
+        entry = self._cache_open(tid)
+        reason = ("an earlier gateway process started this request and stopped before answering it: "
+                  "whether the device acted is unknown; not repeated")  # fmt: skip
+        reply = reply_for(
+            request,
+            int(ResultCode.OUTCOME_UNKNOWN),
+            {"reason": reason},
+            timestamp=self.clock.time_ms(),
+            gateway=self.gateway_sn,
+        )
+        raw = reply.model_dump_json().encode()
+        self.metrics.inc("services_duplicates_total")
+        self.metrics.inc("services_outcome_unknown_total", method=_metric_method(request.method))
+        self.metrics.inc(
+            "services_total", method=_metric_method(request.method), result=int(ResultCode.OUTCOME_UNKNOWN)
+        )
+        log.warning("%s tid %s: started by an earlier process that stopped before answering: "
+                    "answered %d (outcome unknown), not acted on again",
+                    request.method, tid, int(ResultCode.OUTCOME_UNKNOWN))  # fmt: skip
+        assert self.journal is not None
+        try:
+            self.journal.reply_recorded(tid, raw)
+        except Exception:
+            self.metrics.inc("handler_exceptions_total", where="reply_journal")
+            log.exception("could not keep the reply to %s in the state store", tid)
         self._publish_reply(raw, entry, reply_to)
 
     async def _execute(self, request: Any) -> tuple[int, dict[str, Any] | None]:

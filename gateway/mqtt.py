@@ -3,7 +3,10 @@
 Received messages are handed to the asyncio loop with ``call_soon_threadsafe`` and land in a
 bounded queue; when it is full the message is dropped, counted and logged, so a flood never
 blocks paho's thread (a blocked thread would delay every heartbeat and reply). Subscriptions are
-made in the connect callback every time, so a broker restart that forgot them is healed. The
+made in the connect callback, so a broker restart that forgot them is healed; when the CONNACK says the
+broker kept the session this bridge already subscribed on, they are not made again (on NATS each costs a
+JetStream request that blocks the connection while a leader is elected): the liveness probe proves the
+kept subscriptions work, and a deaf link resubscribes. The
 ``on_connected`` hook (``update_topo``, ``state``) runs in the loop after each (re)connect.
 
 Threads: one *supervisor* per bridge (``mqtt-<name>``) finds a broker node and connects (TCP probes
@@ -58,7 +61,15 @@ from gateway.settings import BrokerEndpoint, BrokerSettings
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Inbound", "MqttBridge", "close_client", "probe_topic_for", "tcp_last_ack_age", "tcp_stalled"]
+__all__ = [
+    "Inbound",
+    "MqttBridge",
+    "close_client",
+    "probe_topic_for",
+    "tcp_last_ack_age",
+    "tcp_stalled",
+    "tcp_unacked",
+]
 
 #: How long sent osd is remembered, to be sent again if its connection turns out to have been dead.
 RECENT_WINDOW = 10.0
@@ -132,6 +143,16 @@ def tcp_stalled(sock: Any) -> bool:
         return False
     (unacked,) = struct.unpack_from("I", info, 24)
     return info[2] >= 2 and unacked > 0
+
+
+def tcp_unacked(sock: Any) -> bool:
+    """True when data written to ``sock`` is not acknowledged by the peer's TCP yet (``tcpi_unacked``);
+    False where ``TCP_INFO`` does not exist."""
+    info = _tcp_info(sock)
+    if info is None:
+        return False
+    (unacked,) = struct.unpack_from("I", info, 24)
+    return bool(unacked > 0)
 
 
 def tcp_last_ack_age(sock: Any) -> float | None:
@@ -286,6 +307,7 @@ class MqttBridge:
         self._recent: deque[tuple[float, str, bytes]] = deque(maxlen=max(1, settings.telemetry_buffer))
         self._drops_counted = (0, 0)
         self._subscribed = threading.Event()  # set once the broker acknowledged every subscription
+        self._subscribed_once = False  # this bridge's subscriptions were acknowledged on its session once
         self._sub_mid: int | None = None
         self._dropped_logged = 0
         self.last_refusal: str | None = None  # the broker's reason for refusing the last CONNECT
@@ -296,6 +318,7 @@ class MqttBridge:
         self._done = threading.Event()  # the current connection ended (paho's on_disconnect)
         self._connack = threading.Event()
         self._refused = False
+        self._refused_busy = False
         self._aborting = False
         self._loss = Loss.CLOSED
         self._session_live = False  # CONNACK accepted on the current connection
@@ -560,6 +583,7 @@ class MqttBridge:
         # could write before the CONNECT) unless a socket_register_write callback is set (public API)
         client.on_socket_register_write = _leave_writing_to_the_network_thread
         started = False
+        self.policy.attempt(index)
         try:
             client.connect(ep.host, ep.port, **self._connect_kwargs())
             started = True
@@ -586,30 +610,38 @@ class MqttBridge:
             self._release_sockets(sockpair_only=True)  # loop_start makes a new pair each time
             self.stalled = False
 
-    def _attempt_failed(self, ep: BrokerEndpoint, reason: str) -> float:
-        """The broker answered TCP but the connection failed (TLS, CONNACK): back off."""
+    def _attempt_failed(self, ep: BrokerEndpoint, reason: str, *, busy: bool = False) -> float:
+        """The broker answered TCP but the connection failed (TLS, CONNACK): the next node, or back off
+        (``busy``: the way a cluster that is not ready fails; see :meth:`ReconnectPolicy.refused`)."""
         self._metrics.inc("mqtt_connect_failures_total", link=self._name)
         if reason != self.last_error:
             log.error("broker %s (%s): %s", ep.where(), self._name, reason)
         self.last_error = reason
         pahocompat.close_network_socket(self._client)
-        return self.policy.refused(self._clock())
+        return self.policy.refused(self._clock(), busy=busy)
 
     def _run_connection(self, ep: BrokerEndpoint) -> float:
-        deadline = self._clock() + self.settings.connect_timeout
+        started = self._clock()
+        quick = self.policy.connack_timeout(self.settings.connect_timeout)
         while not (self._connack.is_set() or self._done.is_set() or self._stop.is_set()):
-            if self._clock() > deadline:
+            waited = self._clock() - started
+            # past the quick deadline, wait on only while TCP has not delivered the CONNECT (a slow link):
+            # a broker that has it and does not answer is left for the next node
+            if waited > self.settings.connect_timeout or (
+                waited > quick and not tcp_unacked(self._client.socket())
+            ):
                 self._abort()
-                return self._attempt_failed(ep, "no CONNACK within connect_timeout")
-            self._connack.wait(0.05)
+                return self._attempt_failed(ep, f"no CONNACK within {waited:.2g} s", busy=True)
+            self._connack.wait(0.02)
         if self._stop.is_set():
             self._close_for_stop()
             return self._clock()
         if self._refused or not self._connack.is_set():
             self._wait_done()
             if not self._refused:  # closed without a CONNACK (NATS while JetStream elects a leader): say so
-                return self._attempt_failed(ep, "the broker closed the connection before its CONNACK")
-            return self.policy.refused(self._clock())
+                reason = "the broker closed the connection before its CONNACK"
+                return self._attempt_failed(ep, reason, busy=True)
+            return self.policy.refused(self._clock(), busy=self._refused_busy)
         connected_at = self._clock()
         self.policy.connected(connected_at, self.endpoints.index(ep))
         self._watch(ep)
@@ -715,8 +747,8 @@ class MqttBridge:
             self._metrics.inc("mqtt_deaf_total", link=self._name)
             self._metrics.set("mqtt_deaf", 1, link=self._name)
         if step is ProbeStep.RESUBSCRIBE:
-            log.warning("broker %s (%s): deaf: our probe did not come back within %.1f s; resubscribing",
-                        ep.where(), self._name, self.settings.liveness_timeout)  # fmt: skip
+            log.warning("broker %s (%s): deaf: our probe did not come back within %.2g s; resubscribing",
+                        ep.where(), self._name, self.liveness.last_deadline)  # fmt: skip
             self._metrics.inc("mqtt_resubscribes_total", link=self._name)
             with self._wake_lock:
                 _, self._sub_mid = self._client.subscribe(self._subscription_list())
@@ -794,6 +826,9 @@ class MqttBridge:
         if reason.is_failure:
             self.last_refusal = str(reason)
             self._refused = True
+            # "server unavailable" (3.1.1: 3; 5: 0x88) and "server busy" (5: 0x89): the cluster is not
+            # ready; credentials, protocol and the rest are refusals
+            self._refused_busy = getattr(reason, "value", None) in (3, 0x88, 0x89)
             self._metrics.inc("mqtt_connect_refused_total", link=self._name)
             log.error("broker %s refused the connection: %s", self._where(), reason)
             self._connack.set()
@@ -806,18 +841,30 @@ class MqttBridge:
             log.info("broker reachable again after %.1f s", self._clock() - self._failing_since)
             self._failing_since = None
         self._subscribed.clear()
-        if self.subscriptions:
+        # the broker kept this session and we subscribed on it before (this process, these topics): its
+        # subscriptions are there, and subscribing again only costs (NATS creates, or looks up, a JetStream
+        # consumer per topic through its metadata leader, and holds the connection up to 4 s per topic
+        # while that leader is being elected). The liveness probe proves it; deaf → resubscribe
+        present = bool(getattr(flags, "session_present", False))
+        kept = present and self._subscribed_once and self.liveness.enabled
+        if self.subscriptions and not kept:
             _, self._sub_mid = client.subscribe(self._subscription_list())
         self._metrics.inc("mqtt_connects_total", link=self._name)
         self._metrics.set("mqtt_connected", 1, link=self._name)
         if not self.policy.takeover_suspected:
             self._metrics.set("mqtt_client_id_conflict", 0, link=self._name)
         log.info(
-            "connected to %s (%s), subscribed to %d topics",
+            "connected to %s (%s), %s %d topics",
             self._where(),
             self._name,
+            "its session kept (no resubscribe):" if kept else "subscribed to",
             len(self.subscriptions),
         )
+        if kept:
+            with self._probe_lock:
+                if self.liveness.enabled:
+                    self.liveness.subscribed(self._clock())
+            self._subscribed.set()
         self._connack.set()
         with contextlib.suppress(RuntimeError):  # the loop closed during shutdown
             self._loop.call_soon_threadsafe(self._after_connect)
@@ -849,6 +896,7 @@ class MqttBridge:
                     )
                 else:
                     self.liveness.subscribed(self._clock())
+        self._subscribed_once = not refused  # a refused topic is asked for again on every connect
         self._subscribed.set()
 
     @property

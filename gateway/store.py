@@ -5,7 +5,11 @@ Besides the wayline tasks it is the devices' :class:`adapters.base.TaskJournal` 
 to point a device started, so it continues under the same id after a restart) and the dispatcher's
 reply journal (``tid`` → the reply, bounded by count and age): a request resent with the same ``tid``
 after a restart is answered from here and not acted on again. The reply is written before it is
-published, so a process killed between acting and replying still knows it acted.
+published, so a process killed between acting and replying still knows it acted. A request with a
+visible effect is also marked *started* (``tid`` → method) before it is acted on, and the mark goes in
+the same transaction that keeps its reply: a process killed after acting and before keeping the reply
+leaves the mark, and the next process answers a resend "outcome unknown, not repeated" instead of acting
+twice.
 
 A damaged database file (not a database, a corrupt page) is set aside, renamed
 ``<name>.damaged-<unix ms>`` with its WAL, with an ERROR log line, and a fresh store is made: never a
@@ -70,6 +74,11 @@ CREATE TABLE IF NOT EXISTS replies (
     stored_ms INTEGER NOT NULL
 );
 CREATE INDEX IF NOT EXISTS replies_by_age ON replies (stored_ms);
+CREATE TABLE IF NOT EXISTS started (
+    tid TEXT PRIMARY KEY,           -- a request being acted on: written before acting, gone with its reply
+    method TEXT NOT NULL,
+    stored_ms INTEGER NOT NULL
+);
 """
 
 
@@ -205,13 +214,30 @@ class StateStore:
         return cur.rowcount
 
     # -- replies (the dispatcher's reply journal) -----------------------------------------------------
-    def reply_recorded(self, tid: str, payload: bytes) -> None:
-        """Keep the reply to ``tid`` (one INSERT, its own transaction); now and then the oldest beyond
-        :data:`REPLIES_KEPT` go."""
+    def request_started(self, tid: str, method: str) -> None:
+        """``tid`` is about to be acted on (one INSERT, its own transaction): until its reply is kept, a
+        resend after a restart is not acted on again (:meth:`started_request`)."""
         self._db.execute(
-            "INSERT OR REPLACE INTO replies (tid, payload, stored_ms) VALUES (?, ?, ?)",
-            (tid, payload, self._now_ms()),
+            "INSERT OR REPLACE INTO started (tid, method, stored_ms) VALUES (?, ?, ?)",
+            (tid, method, self._now_ms()),
         )
+
+    def started_request(self, tid: str, max_age_ms: int) -> str | None:
+        """The method of ``tid`` if it was started at most ``max_age_ms`` ago and has no reply kept."""
+        row = self._db.execute(
+            "SELECT method FROM started WHERE tid=? AND stored_ms >= ?", (tid, self._now_ms() - max_age_ms)
+        ).fetchone()
+        return None if row is None else str(row[0])
+
+    def reply_recorded(self, tid: str, payload: bytes) -> None:
+        """Keep the reply to ``tid`` and clear its started mark (one transaction); now and then the
+        oldest beyond :data:`REPLIES_KEPT` go."""
+        with self._tx():
+            self._db.execute(
+                "INSERT OR REPLACE INTO replies (tid, payload, stored_ms) VALUES (?, ?, ?)",
+                (tid, payload, self._now_ms()),
+            )
+            self._db.execute("DELETE FROM started WHERE tid=?", (tid,))
         self._replies_written += 1
         if self._replies_written % 1000 == 0:
             self.replies_pruned(REPLIES_KEPT)
@@ -232,11 +258,17 @@ class StateStore:
                 (keep,),
             )
             gone = cur.rowcount
+            self._db.execute(
+                "DELETE FROM started WHERE tid NOT IN "
+                "(SELECT tid FROM started ORDER BY stored_ms DESC LIMIT ?)",
+                (keep,),
+            )
             if max_age_ms is not None:
                 cur = self._db.execute(
                     "DELETE FROM replies WHERE stored_ms < ?", (self._now_ms() - max_age_ms,)
                 )
                 gone += cur.rowcount
+                self._db.execute("DELETE FROM started WHERE stored_ms < ?", (self._now_ms() - max_age_ms,))
         return gone
 
     def close(self) -> None:

@@ -13,6 +13,9 @@ Codes this project reserves (DJI's catalogue does not use the 399xxx block or 59
 - 399002 ``UNKNOWN_METHOD``: no model for this method on this topic (neither the seed nor an extension).
 - 399003 ``CLOUD_CONTROL_NOT_GRANTED``: live control needs cloud control (``cloud_control_auth_request``
   accepted by the allow-list or the operator) and this cloud user does not hold it (docs/cloud-api.md).
+- 399004 ``OUTCOME_UNKNOWN``: a request resent with a tid that an earlier gateway process started acting on
+  and stopped (killed) before keeping its reply: not acted on again, since whether the device acted is
+  unknown; the cloud reads the device's state (docs/brokers.md, "Exactly once across restarts").
 - 599001 ``INTERNAL_ERROR``: the gateway failed (a bug or an unexpected exception); never a device error.
 - 336000 + ack: the Onboard SDK ground-station ACK family (seed 004), reported as ``ground_station_ack(ack)``
   so the raw ACK survives the trip to the cloud (ack 0 is success and maps to 0).
@@ -78,6 +81,11 @@ class ResultCode(enum.IntEnum):
     METHOD_NOT_SUPPORTED = 399001, "dji-gateway: this device does not support this method."
     UNKNOWN_METHOD = 399002, "dji-gateway: unknown method for this topic."
     CLOUD_CONTROL_NOT_GRANTED = 399003, "dji-gateway: cloud control is not granted to this cloud user."
+    OUTCOME_UNKNOWN = (
+        399004,
+        "dji-gateway: an earlier gateway process started this request and stopped before answering; "
+        "whether the device acted is unknown, and it was not repeated.",
+    )
     INTERNAL_ERROR = 599001, "dji-gateway: internal error."
 
 

@@ -49,13 +49,16 @@ class NatsCluster:
 
     NODES = 3
 
-    def __init__(self, workdir: Path | None = None) -> None:
+    def __init__(self, workdir: Path | None = None, *, mqtt_extra: str = "") -> None:
+        """``mqtt_extra``: more settings inside each node's ``mqtt { … }`` block (e.g.
+        ``consumer_memory_storage: true``; ``bench/failover.py`` compares them)."""
         self.host = "127.0.0.1"
         self.dir = Path(workdir) if workdir else Path(tempfile.mkdtemp(prefix="djigw-nats-"))
         self.client_ports = [free_port() for _ in range(self.NODES)]
         self.cluster_ports = [free_port() for _ in range(self.NODES)]
         self.mqtt_ports = [free_port() for _ in range(self.NODES)]
         self._procs: list[subprocess.Popen[bytes] | None] = [None] * self.NODES
+        extra = f", {mqtt_extra}" if mqtt_extra else ""
         routes = ", ".join(f"nats-route://{self.host}:{p}" for p in self.cluster_ports)
         for i in range(self.NODES):
             store = self.dir / f"n{i}"
@@ -68,7 +71,7 @@ class NatsCluster:
                         f"jetstream {{ store_dir: {store}, max_memory_store: 64MB, max_file_store: 512MB }}",
                         f"cluster {{ name: djigw-test, listen: {self.host}:{self.cluster_ports[i]}, "
                         f"routes: [{routes}] }}",
-                        f"mqtt {{ listen: {self.host}:{self.mqtt_ports[i]} }}",
+                        f"mqtt {{ listen: {self.host}:{self.mqtt_ports[i]}{extra} }}",
                         "",
                     ]
                 )

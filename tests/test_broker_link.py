@@ -10,6 +10,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from gateway.broker_link import (
+    BUSY_BACKOFF_MAX,
+    CONNACK_FIRST,
+    NEXT_NODE_JITTER,
+    QUICK_MIN,
     SHORT_LIVED,
     STABLE_AFTER,
     TAKEOVER_STREAK,
@@ -64,15 +68,68 @@ def test_failover_prefers_the_node_after_the_one_that_died() -> None:
         p.choose(set())
 
 
-def test_a_broker_that_refuses_gets_capped_exponential_backoff_with_jitter() -> None:
+def _cycle(p: ReconnectPolicy, *, busy: bool) -> list[float]:
+    """One attempt on every node, each failing; the waits the policy asked for."""
+    waits = []
+    for _ in range(p.endpoints):
+        p.attempt(p.choose(set(range(p.endpoints))))
+        waits.append(p.refused(0.0, busy=busy))
+    return waits
+
+
+def test_a_broker_that_refuses_gets_capped_exponential_backoff_with_jitter_once_every_node_refused() -> None:
     p = policy()
-    waits = [p.refused(0.0) for _ in range(12)]
+    cycles = [_cycle(p, busy=False) for _ in range(12)]
     ceilings = [min(30.0, 0.5 * 2**i) for i in range(12)]
-    for wait, ceiling in zip(waits, ceilings, strict=True):
-        assert ceiling / 2 <= wait <= ceiling
-    assert max(waits) <= 30.0
+    for waits, ceiling in zip(cycles, ceilings, strict=True):
+        assert all(0.0 <= w <= NEXT_NODE_JITTER for w in waits[:-1])  # other nodes untried: no backoff
+        assert ceiling / 2 <= waits[-1] <= ceiling
+    assert max(w for c in cycles for w in c) <= 30.0
     p.lost(100.0, lasted=STABLE_AFTER, how=Loss.CLOSED)  # a stable connection resets it
-    assert p.refused(0.0) <= 0.5
+    assert _cycle(p, busy=False)[-1] <= 0.5
+
+
+def test_each_node_is_tried_in_turn_before_any_backoff() -> None:
+    """A node that answers TCP and fails the attempt is not chosen again while another answers."""
+    p = policy(3)
+    p.connected(0.0, 0)  # node 0 was ours and died
+    tried = []
+    for _ in range(4):
+        index = p.choose({1, 2})
+        p.attempt(index)
+        tried.append(index)
+        p.refused(0.0, busy=True)
+    assert tried == [1, 2, 1, 2]
+
+
+def test_a_busy_cluster_is_retried_within_a_second_whatever_it_lasted() -> None:
+    """No CONNACK, closed before the CONNACK, server unavailable: the cluster is not ready. Once every node
+    failed, the backoff grows from reconnect_min/2 but never past BUSY_BACKOFF_MAX: the gateway comes back
+    at most ~1 s after the cluster does, and a fleet spreads its attempts (½–1× the ceiling)."""
+    for seed in range(20):
+        p = policy(seed=seed)
+        lasts = [_cycle(p, busy=True)[-1] for _ in range(40)]
+        assert 0.25 <= lasts[0] <= 0.5
+        assert all(BUSY_BACKOFF_MAX / 2 <= w <= BUSY_BACKOFF_MAX for w in lasts[1:])
+        p.connected(0.0, 1)  # a CONNACK resets it
+        assert _cycle(p, busy=True)[-1] <= 0.5
+
+
+def test_the_connack_deadline_is_short_with_several_nodes() -> None:
+    assert policy(3).connack_timeout(5.0) == CONNACK_FIRST
+    assert policy(1).connack_timeout(5.0) == 5.0  # one broker: nowhere else to go
+    assert policy(3).connack_timeout(0.5) == 0.5
+
+
+def test_a_dead_node_does_not_hold_the_cycle_open() -> None:
+    """Node 0 died (it answers no probe): once nodes 1 and 2 both failed, the backoff applies."""
+    p = policy(3)
+    p.connected(0.0, 0)
+    waits = []
+    for _ in range(2):
+        p.attempt(p.choose({1, 2}))
+        waits.append(p.refused(0.0, busy=True))
+    assert waits[0] <= NEXT_NODE_JITTER and waits[1] >= 0.25
 
 
 def test_mqtt5_session_taken_over_backs_off_to_at_least_30_s_and_is_flagged() -> None:
@@ -257,3 +314,44 @@ def test_a_deaf_connection_is_left_for_the_next_node_soon_but_jittered() -> None
     assert all(0.0 <= w <= 0.5 for w in waits) and len({round(w, 4) for w in waits}) > 10
     assert not p.takeover_suspected  # short deaf connections are not a twin's doing
     assert p.choose({0, 1, 2}) == 1  # the node after the deaf one first
+
+
+def test_a_connection_not_proven_yet_gets_a_quick_deadline_from_the_links_round_trips() -> None:
+    """The first connection of a process waits ``timeout`` (no round trip known); once the link has
+    shown its round trips, a new connection (after a failover) is given QUICK_FACTOR × the slowest of
+    them, at least QUICK_MIN: a connection made while a cluster elects its leaders is found deaf and left
+    in well under a second, not 2 × 3 s."""
+    p = probe(timeout=3.0)
+    p.subscribed(0.0)
+    assert p.step(0.0) is ProbeStep.SEND and p.next_at() == 3.0  # nothing known: the full timeout
+    assert p.received(0.004, p.nonce.encode())
+    p.lost()  # the node dies; a new connection to the next one
+    p.subscribed(10.0)
+    assert p.step(10.0) is ProbeStep.SEND and p.next_at() == pytest.approx(10.0 + QUICK_MIN)
+    assert p.step(10.0 + QUICK_MIN) is ProbeStep.RESUBSCRIBE
+    p.subscribed(10.35)
+    assert p.step(10.35) is ProbeStep.SEND
+    assert p.step(10.35 + QUICK_MIN) is ProbeStep.RECONNECT  # deaf twice: 0.6 s after the SUBACK
+    # a proven connection's periodic probe keeps the full timeout (no false alarm on a busy link)
+    p.lost()
+    p.subscribed(20.0)
+    assert p.step(20.0) is ProbeStep.SEND
+    assert p.received(20.01, p.nonce.encode())
+    due = p.next_at()
+    assert due is not None and p.step(due) is ProbeStep.SEND and p.next_at() == pytest.approx(due + 3.0)
+
+
+def test_a_late_probe_proves_the_link_slow_not_deaf_and_widens_the_quick_deadline() -> None:
+    p = probe(timeout=3.0)
+    p.subscribed(0.0)
+    p.step(0.0)
+    assert p.received(0.01, p.nonce.encode())
+    p.lost()
+    p.subscribed(5.0)
+    assert p.step(5.0) is ProbeStep.SEND
+    slow = p.nonce.encode()
+    assert p.step(5.0 + QUICK_MIN) is ProbeStep.RESUBSCRIBE and p.deaf
+    assert p.received(5.0 + 0.5, slow)  # back after 0.5 s: it receives, slowly
+    assert p.state is Liveness.LIVE and not p.deaf
+    assert p.quick_deadline() == pytest.approx(4 * 0.5)  # the next quick deadline allows for it
+    assert not p.received(5.6, b"djigw-probe 000000000000 1")  # another process's probe proves nothing

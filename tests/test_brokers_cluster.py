@@ -36,7 +36,7 @@ def test_gateway_fails_over_when_its_nats_node_is_killed(cluster: NatsCluster) -
     """url = [n1, n2, n3], protocol 3.1.1: the gateway connects to n1; n1 is SIGKILLed with requests in
     flight (10/s, none re-sent by the cloud): the gateway is on another node at once; services are
     answered again, 20 of 20 afterwards; every request answered, none acted on twice
-    (``bench/failover.py``; ``make bench`` runs six rounds)."""
+    (``bench/failover.py``; ``make bench`` runs twenty, with the broker's and the gateway's shares)."""
     r = measure_round(cluster, 0)
     print(f"\nfailover: on node {r.node + 1} {r.reconnected:.2f} s after the kill, answered again "
           f"after {r.first_answer:.2f} s, {r.requests} requests, {r.redelivered} twice")  # fmt: skip

@@ -5,6 +5,7 @@ it is published, so "acted on, then killed before replying" leaves the same stor
 
 from __future__ import annotations
 
+import asyncio
 import json
 import time
 import uuid
@@ -14,16 +15,24 @@ from typing import Any
 import pytest
 
 from adapters.rsdk.sim import GimbalCanSim
+from gateway.app import build_registry
+from gateway.clock import ManualClock
+from gateway.devices import DeviceTable
+from gateway.dispatcher import Dispatcher
 from gateway.local_broker import LocalBroker
+from gateway.metrics import Metrics
+from gateway.settings import DispatcherSettings
+from gateway.store import StateStore
+from schemas import TopicKind, topic
 from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
-
-pytestmark = pytest.mark.broker
+from tests.test_dispatcher_limits import Recorder, SlowAdapter
 
 GW = "GW-ONCE-1"
 SN = "RSDK-ONCE-1"
 PI = "20-0-0"
 
 
+@pytest.mark.broker
 def test_a_photo_resent_with_the_same_tid_after_a_restart_is_taken_once(
     private_broker: LocalBroker, can_channel: str, tmp_path: Path
 ) -> None:
@@ -83,3 +92,91 @@ def test_a_photo_resent_with_the_same_tid_after_a_restart_is_taken_once(
     finally:
         cloud.close()
         sim.stop()
+
+
+# ------------------------------------------ started, never answered: the window before the reply is kept
+def _request(tid: str, method: str, **data: Any) -> bytes:
+    body = {
+        "tid": tid,
+        "bid": "b",
+        "timestamp": 0,
+        "method": method,
+        "data": {"payload_index": "39-0-7", **data},
+    }
+    return json.dumps(body).encode()
+
+
+def _process(store_dir: Path, clock: ManualClock) -> tuple[Dispatcher, SlowAdapter, Recorder, StateStore]:
+    """One gateway process as far as the reply journal goes: a dispatcher on the store in ``store_dir``."""
+    store = StateStore(store_dir, now_ms=clock.time_ms)
+    adapter, out = SlowAdapter(), Recorder()
+    devices = DeviceTable([adapter])
+    devices.authority.payloads.add("39-0-7")
+    d = Dispatcher(gateway_sn=GW, registry=build_registry(), devices=devices, outbox=out,
+                   settings=DispatcherSettings(request_timeout=2.0), clock=clock, metrics=Metrics(),
+                   journal=store)  # fmt: skip
+    return d, adapter, out, store
+
+
+def test_a_request_started_by_a_process_killed_before_its_reply_is_not_acted_on_again(tmp_path: Path) -> None:
+    """The process acts (the device took the photo) and dies before the reply is kept: the store holds
+    the tid's *started* mark. The next process answers the resend 399004 (outcome unknown, not repeated),
+    keeps that answer, and gives it again to a further resend; the device is not asked again."""
+
+    async def scenario() -> None:
+        clock = ManualClock()
+        services = topic(TopicKind.SERVICES, GW)
+        d1, adapter1, out1, store1 = _process(tmp_path, clock)
+        d1.submit(services, _request("photo-1", "camera_photo_take"))
+        for _ in range(20):  # until the adapter is acting on it
+            await asyncio.sleep(0)
+        assert adapter1.calls == 1 and out1.replies == []
+        store1.close()  # the process dies here: no reply kept, none published
+
+        clock.advance(5.0)
+        d2, adapter2, out2, store2 = _process(tmp_path, clock)
+        await d2.handle(services, _request("photo-1", "camera_photo_take"))
+        await d2.handle(services, _request("photo-1", "camera_photo_take"))  # the cloud resends again
+        assert adapter2.calls == 0  # not acted on again
+        assert [r["data"]["result"] for r in out2.replies] == [399004, 399004]
+        assert out2.replies[0] == out2.replies[1]
+        assert "not repeated" in out2.replies[0]["data"]["output"]["reason"]
+        assert (
+            d2.metrics.counters[("services_outcome_unknown_total", (("method", "camera_photo_take"),))] == 1
+        )
+        store2.close()
+
+        # a third process: the 399004 answer was kept like any reply
+        d3, adapter3, out3, store3 = _process(tmp_path, clock)
+        await d3.handle(services, _request("photo-1", "camera_photo_take"))
+        assert adapter3.calls == 0 and out3.replies == [out2.replies[0]]
+        store3.close()
+
+    asyncio.run(scenario())
+
+
+def test_the_started_mark_goes_with_the_reply_and_ages_out(tmp_path: Path) -> None:
+    clock = ManualClock()
+    store = StateStore(tmp_path, now_ms=clock.time_ms)
+    store.request_started("t-1", "camera_photo_take")
+    assert store.started_request("t-1", 120_000) == "camera_photo_take"
+    store.reply_recorded("t-1", b"reply")  # one transaction: the reply kept, the mark gone
+    assert store.started_request("t-1", 120_000) is None and store.recorded_reply("t-1", 120_000) == b"reply"
+    store.request_started("t-2", "camera_photo_take")
+    clock.advance(121.0)
+    assert store.started_request("t-2", 120_000) is None  # older than the journal's window: a new request
+    assert store.replies_pruned(10, max_age_ms=120_000) == 1  # the reply; the stale mark goes too
+    assert store.started_request("t-2", 10**9) is None
+    store.close()
+
+    async def scenario() -> None:
+        services = topic(TopicKind.SERVICES, GW)
+        d, adapter, out, store = _process(tmp_path, clock)
+        adapter.release.set()
+        await d.handle(services, _request("mode-1", "camera_mode_switch", camera_mode=1))
+        await d.handle(services, _request("photo-2", "camera_photo_take"))
+        assert [r["data"]["result"] for r in out.replies] == [0, 0]
+        assert store.started_request("photo-2", 10**9) is None  # answered: no mark left
+        store.close()
+
+    asyncio.run(scenario())

@@ -591,6 +591,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     with contextlib.suppress(KeyboardInterrupt):
         stop.wait()
     runner.stop()
+    print(f"gimbal simulator stopped: {model.photos} photo(s) taken", flush=True)  # what a test reads back
     return 0
 
 
