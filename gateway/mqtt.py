@@ -297,6 +297,7 @@ class MqttBridge:
             rng=rng,
         )
         self._probe_lock = threading.Lock()  # the supervisor steps it, the network thread answers it
+        self._traffic_at: float | None = None  # when the broker last delivered a message (not a probe)
         self._buffer_lock = threading.Lock()
         # paho writes a byte to its wake-up socket pair on every publish and disconnect, from the caller's
         # thread; the supervisor closes that pair after each connection (pahocompat.release_sockets). This
@@ -736,7 +737,7 @@ class MqttBridge:
         """Advance the liveness probe; True when it gave the connection up (deaf twice)."""
         with self._probe_lock:
             was_deaf = self.liveness.deaf
-            step = self.liveness.step(now)
+            step = self.liveness.step(now, self._traffic_at)
             nonce = self.liveness.nonce
         if step is ProbeStep.NONE:
             return False
@@ -935,6 +936,7 @@ class MqttBridge:
         if msg.topic == self.probe_topic:
             self._probe_back(bytes(msg.payload))
             return
+        self._traffic_at = self._clock()  # the link receives (LivenessProbe.step); a float store, no lock
         if self.inline is not None:
             try:
                 if self.inline(msg.topic, bytes(msg.payload)):  # paho's payload is bytes: not copied

@@ -287,6 +287,25 @@ def test_deafness_is_detected_and_acted_on_within_two_timeouts_of_the_suback() -
         assert deaf_from < t <= deaf_from + 5.0 + 2 * 3.0 + 0.2
 
 
+def test_other_messages_delivered_after_a_missed_probe_prove_the_link() -> None:
+    """A NATS cluster after a node died: the probe topic's consumer has no leader for seconds while the
+    cloud's requests flow. Messages delivered after the probe went out prove the link; none since (or only
+    older ones) and it is deaf as before."""
+    p = probe(timeout=1.0)
+    p.subscribed(0.0)
+    assert p.step(0.0) is ProbeStep.SEND
+    assert p.step(1.0, traffic_at=0.4) is ProbeStep.NONE  # a request came in after the probe went out
+    assert p.state is Liveness.LIVE and not p.deaf and p.last_proof == 0.4
+    due = p.next_at()
+    assert due is not None and 1.0 + 2.5 <= due <= 1.0 + 5.0  # the next probe at the usual interval
+    assert p.step(due) is ProbeStep.SEND
+    # the requests stopped too: only a message from before this probe; deaf, resubscribe, then reconnect
+    assert p.step(due + 1.0, traffic_at=0.4) is ProbeStep.RESUBSCRIBE and p.deaf
+    p.subscribed(due + 1.1)
+    assert p.step(due + 1.1, traffic_at=0.4) is ProbeStep.SEND
+    assert p.step(due + 2.1, traffic_at=0.4) is ProbeStep.RECONNECT
+
+
 def test_a_lost_suback_after_resubscribing_still_leads_to_the_next_probe() -> None:
     p = probe(timeout=1.0)
     p.subscribed(0.0)
