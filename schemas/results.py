@@ -13,6 +13,11 @@ Codes this project reserves (DJI's catalogue does not use the 399xxx block or 59
 - 399002 ``UNKNOWN_METHOD``: no model for this method on this topic (neither the seed nor an extension).
 - 399003 ``CLOUD_CONTROL_NOT_GRANTED``: live control needs cloud control (``cloud_control_auth_request``
   accepted by the allow-list or the operator) and this cloud user does not hold it (docs/cloud-api.md).
+- 399010..399016: live streaming (``live_*``, docs/video.md): 399010 ``LIVE_URL_TYPE_UNSUPPORTED`` (Agora,
+  RTSP, GB28181, WHIP: no maintained engine here), 399011 ``LIVE_ALREADY_STREAMING`` (this video already
+  streams to another target), 399012 ``LIVE_UNKNOWN_VIDEO`` (no configured source for this video id),
+  399013 ``LIVE_LENS_UNAVAILABLE``, 399014 ``LIVE_NOT_STREAMING``, 399015 ``LIVE_START_FAILED`` (the media
+  engine could not start or lost the source; also ``live_status.error_status``), 399016 ``LIVE_TOO_MANY``.
 - 599001 ``INTERNAL_ERROR``: the gateway failed (a bug or an unexpected exception); never a device error.
 - 336000 + ack: the Onboard SDK ground-station ACK family (seed 004), reported as ``ground_station_ack(ack)``
   so the raw ACK survives the trip to the cloud (ack 0 is success and maps to 0).
@@ -78,6 +83,13 @@ class ResultCode(enum.IntEnum):
     METHOD_NOT_SUPPORTED = 399001, "dji-gateway: this device does not support this method."
     UNKNOWN_METHOD = 399002, "dji-gateway: unknown method for this topic."
     CLOUD_CONTROL_NOT_GRANTED = 399003, "dji-gateway: cloud control is not granted to this cloud user."
+    LIVE_URL_TYPE_UNSUPPORTED = 399010, "dji-gateway: this live url_type is not supported here."
+    LIVE_ALREADY_STREAMING = 399011, "dji-gateway: this video already streams to another target."
+    LIVE_UNKNOWN_VIDEO = 399012, "dji-gateway: no video source is configured for this video_id."
+    LIVE_LENS_UNAVAILABLE = 399013, "dji-gateway: this video cannot switch to that lens."
+    LIVE_NOT_STREAMING = 399014, "dji-gateway: this video is not streaming."
+    LIVE_START_FAILED = 399015, "dji-gateway: the stream failed (source/target unreachable, no engine)."
+    LIVE_TOO_MANY = 399016, "dji-gateway: too many streams at once."
     INTERNAL_ERROR = 599001, "dji-gateway: internal error."
 
 

@@ -60,8 +60,16 @@ def simulated_settings(base: dict[str, Any]) -> dict[str, Any]:
     doc = dict(base)
     doc.setdefault("gateway_sn", SIM_GATEWAY_SN)
     devices = list(doc.get("devices", []))
-    devices += [dict(family.tour) for family in families.all_families() if family.tour is not None]
+    tour = [dict(family.tour) for family in families.all_families() if family.tour is not None]
+    devices += tour
     doc["devices"] = devices
+    # every simulated device streams a test pattern (its sn, the time, osd values drawn in: docs/video.md)
+    video = dict(doc.get("video", {}))
+    video["sources"] = list(video.get("sources", [])) + [
+        {"sn": d["sn"], "camera_index": d.get("payload_index", "0-0-0"), "source": "test:"} for d in tour
+    ]
+    video.setdefault("max_streams", len(tour))
+    doc["video"] = video
     return doc
 
 
