@@ -7,22 +7,17 @@ streams in all). Skipped with the reason when ffmpeg/ffprobe are not installed (
 
 from __future__ import annotations
 
-import contextlib
 import shutil
-import socket
-import subprocess
-import threading
 import time
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
 
-from gateway.cli.run import SIM_AIRCRAFT_SN, simulated_settings, start_simulators
+from gateway.cli.run import SIM_AIRCRAFT_SN
 from gateway.local_broker import LocalBroker
-from gateway.settings import load_settings
-from tests.support import CloudClient, GatewayThread, wait_until
+from tests.support import wait_until
+from tests.video_rig import CAMERA, VIDEO, Receiver, Rig, free_port, probe
 
 pytestmark = [
     pytest.mark.broker,
@@ -31,132 +26,6 @@ pytestmark = [
         reason="ffmpeg/ffprobe not installed (make ffmpeg: apt-get install ffmpeg fonts-dejavu-core)",
     ),
 ]
-
-VIDEO = f"{SIM_AIRCRAFT_SN}/0-0-0/normal-0"  # the simulated aircraft's test pattern
-CAMERA = f"{SIM_AIRCRAFT_SN}/0-0-1/normal-0"  # an "IP camera" (an ffmpeg serving H.264 over TCP)
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def listening(port: int) -> bool:
-    """Whether something listens on 127.0.0.1:port, read from /proc (a probe connection would be the one
-    connection an ffmpeg ``-listen 1`` accepts)."""
-    needle = f":{port:04X} "
-    with open("/proc/net/tcp") as f:
-        return any(needle in line and line.split()[3] == "0A" for line in f.readlines()[1:])
-
-
-class Receiver:
-    """An RTMP server for one publish: ``ffmpeg -listen 1`` copying what arrives into an FLV file, its
-    progress read to time the first frame and count frames."""
-
-    def __init__(self, port: int, out: Path) -> None:
-        self.port, self.out = port, out
-        self.url = f"rtmp://127.0.0.1:{port}/live/stream-key-{port}"
-        self.first_frame_at: float | None = None
-        self.frames = 0
-        self.ended_at: float | None = None
-        self.proc = subprocess.Popen(
-            ["ffmpeg", "-hide_banner", "-loglevel", "error", "-nostats", "-progress", "pipe:1",
-             # a listening RTMP input announces audio and video: without a short analyzeduration ffmpeg
-             # probes 5 s for an audio stream that never comes before it passes anything on
-             "-stats_period", "0.1", "-analyzeduration", "300000", "-listen", "1", "-f", "flv",
-             "-i", self.url, "-c", "copy", "-f", "flv", "-y", str(out)],
-            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-        )  # fmt: skip
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-        wait_until(lambda: listening(port), 10, what=f"the RTMP receiver on {port}")
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            key, _, value = line.strip().partition("=")
-            if key == "frame" and value.isdigit() and int(value) > 0:
-                self.frames = int(value)
-                if self.first_frame_at is None:
-                    self.first_frame_at = time.monotonic()
-        self.proc.stdout.close()
-        self.proc.wait()
-        self.ended_at = time.monotonic()
-
-    def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-        self._reader.join(5)
-
-
-def probe(path: Path) -> dict[str, str]:
-    out = subprocess.run(
-        ["ffprobe", "-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries",
-         "stream=codec_name,width,height,nb_read_frames", "-of", "default=noprint_wrappers=1", str(path)],
-        capture_output=True, text=True, timeout=60, check=True,
-    ).stdout  # fmt: skip
-    return dict(line.split("=", 1) for line in out.split())
-
-
-class Camera:
-    """An IP camera: H.264 (640×360, 30 fps) served over TCP to one client at a time, until killed."""
-
-    def __init__(self, port: int) -> None:
-        self.port = port
-        self.proc: subprocess.Popen[bytes] | None = None
-
-    def start(self) -> None:
-        self.proc = subprocess.Popen(
-            ["ffmpeg", "-hide_banner", "-loglevel", "quiet", "-re", "-f", "lavfi", "-i",
-             "testsrc2=size=640x360:rate=30", "-c:v", "libx264", "-preset", "ultrafast",
-             "-tune", "zerolatency",
-             "-g", "15", "-f", "mpegts", f"tcp://127.0.0.1:{self.port}?listen=1"],
-            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-        )  # fmt: skip
-        wait_until(lambda: listening(self.port), 10, what="the camera")
-
-    def kill(self) -> None:
-        if self.proc is not None:
-            self.proc.kill()
-            self.proc.wait()
-
-
-class Rig:
-    def __init__(self, broker: LocalBroker, tmp: Path) -> None:
-        self.tmp = tmp
-        self.camera = Camera(free_port())
-        doc = simulated_settings({"broker": {"url": f"mqtt://127.0.0.1:{broker.port}"}, "osd_period": 1.0})
-        doc["devices"] = [d for d in doc["devices"] if d["type"] == "osdk"]
-        doc["metrics"] = {"enabled": False}
-        doc["video"]["sources"] = [s for s in doc["video"]["sources"] if s["sn"] == SIM_AIRCRAFT_SN] + [
-            {"sn": SIM_AIRCRAFT_SN, "camera_index": "0-0-1", "codec": "h264",
-             "source": f"tcp://127.0.0.1:{self.camera.port}"},
-        ]  # fmt: skip
-        doc["video"].update(max_streams=2, backoff_initial=0.3, backoff_max=1.0, stall_timeout=3.0)
-        self.sims: list[Any] = []
-        self.settings = start_simulators(load_settings(None, **doc), self.sims)
-        self.cloud = CloudClient(broker.host, broker.port, self.settings.gateway_sn)
-        self.gw = GatewayThread(self.settings).start()
-        self.gw_state = f"{self.settings.gateway_sn}/state"
-
-    def status(self, video_id: str) -> list[tuple[int, int]]:
-        """Every (status, error_status) the gateway has published for ``video_id``, in order."""
-        out = []
-        for body in self.cloud.find(self.gw_state, lambda b: "live_status" in b["data"]):
-            for entry in body["data"]["live_status"]:
-                pair = (entry["status"], entry["error_status"])
-                if entry["video_id"] == video_id and (not out or out[-1] != pair):
-                    out.append(pair)
-        return out
-
-    def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self.gw.stop()
-        self.cloud.close()
-        self.camera.kill()
-        for sim in self.sims:
-            sim.stop()
 
 
 @pytest.fixture(scope="module")
