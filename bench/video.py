@@ -6,6 +6,7 @@ ffmpeg of its own serving 1280×720 30 fps H.264 over TCP). Receivers are ffmpeg
 
 * **start to first frame**: ``live_start_push`` published → the receiver's first frame (the receiver's own
   0.3 s probe included: a listening RTMP input announces audio and video), repeated, p50 and max.
+* **stop to the end**: ``live_stop_push`` published → the receiver's ffmpeg has seen the stream end.
 * **glass to glass**: the test pattern carries the wall-clock millisecond as 24 black/white blocks drawn
   as each frame is made (ffmpeg's ``time(0)``); a receiver decodes every frame to 8-bit luma and reads the
   blocks back when the frame arrives: latency = arrival − drawn. Both clocks are this machine's.
@@ -82,8 +83,8 @@ def _ok(reply: dict[str, Any]) -> None:
         raise AssertionError(f"{reply['method']} answered {reply['data']}")
 
 
-def _first_frames(rig: Rig, tmp: Path, runs: int) -> list[float]:
-    out = []
+def _first_frames(rig: Rig, tmp: Path, runs: int) -> tuple[list[float], list[float]]:
+    out, ends = [], []
     for i in range(runs):
         rx = Receiver(free_port(), tmp / f"first-{i}.flv")
         try:
@@ -92,11 +93,14 @@ def _first_frames(rig: Rig, tmp: Path, runs: int) -> list[float]:
             wait_until(lambda rx=rx: rx.first_frame_at is not None, 10, what="the first frame")
             assert rx.first_frame_at is not None
             out.append((rx.first_frame_at - asked) * 1000)
+            stop = time.monotonic()
             _ok(rig.cloud.service("live_stop_push", {"video_id": VIDEO}))
             wait_until(lambda rx=rx: rx.ended_at is not None, 3, what="the stream's end")
+            assert rx.ended_at is not None
+            ends.append((rx.ended_at - stop) * 1000)
         finally:
             rx.close()
-    return out
+    return out, ends
 
 
 def _glass_to_glass(rig: Rig, seconds: float) -> list[float]:
@@ -140,11 +144,14 @@ def run(cfg: Config) -> list[Row]:
         tmp = Path(tmpdir)
         rig = Rig(broker, tmp, camera_size=f"{W}x{H}")
         try:
-            first = _first_frames(rig, tmp, runs)
+            first, ends = _first_frames(rig, tmp, runs)
             rows.append(Row("video", "start to first frame p50 (ms)", runs, statistics.median(first),
                             unit="ms",
                             note=f"live_start_push → RTMP receiver; max {max(first):.0f} ms; target < 5000 "
                             "(receiver's 0.3 s probe included)"))  # fmt: skip
+            rows.append(Row("video", "stop to the stream's end p50 (ms)", runs, statistics.median(ends),
+                            unit="ms", note=f"live_stop_push → the receiver's ffmpeg ends; "
+                            f"max {max(ends):.0f} ms; target < 2000"))  # fmt: skip
             g2g = sorted(_glass_to_glass(rig, window))
             p95 = g2g[int(len(g2g) * 0.95)]
             rows.append(Row("video", "glass to glass p50 (ms)", len(g2g), statistics.median(g2g), unit="ms",
