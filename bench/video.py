@@ -119,6 +119,61 @@ def _glass_to_glass(rig: Rig, seconds: float) -> list[float]:
     return samples
 
 
+def _preview_glass_to_glass(rig: Rig, seconds: float) -> list[float]:
+    """The console's preview (WebSocket fMP4) decoded as it arrives: drawn → decoded, ms."""
+    import asyncio
+
+    import aiohttp
+
+    rx = Receiver(free_port(), Path(tempfile.mkdtemp(prefix="bench-video-")) / "g2g-preview.flv")
+    dec = subprocess.Popen(
+        ["ffmpeg", "-hide_banner", "-loglevel", "error", "-fflags", "nobuffer", "-flags", "low_delay",
+         "-probesize", "32", "-analyzeduration", "0", "-f", "mp4", "-i", "pipe:0", "-f", "rawvideo",
+         "-pix_fmt", "gray", "pipe:1"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    latencies: list[float] = []
+
+    def frames() -> None:
+        assert dec.stdout is not None
+        while len(frame := dec.stdout.read(W * H)) == W * H:
+            now_ms = time.time() * 1000
+            latencies.append((int(now_ms) - read_timecode(frame, W, H)) % 2**TIMECODE_BITS + now_ms % 1)
+
+    reader = threading.Thread(target=frames, daemon=True)
+    reader.start()
+
+    async def feed() -> None:
+        url = f"http://127.0.0.1:{rig.web_port}/api/video?id={VIDEO}"
+        async with aiohttp.ClientSession() as session, session.ws_connect(url) as ws:
+            assert dec.stdin is not None
+            deadline = time.monotonic() + seconds + 2.0
+            while time.monotonic() < deadline:
+                msg = await asyncio.wait_for(ws.receive(), 5)
+                if msg.type != aiohttp.WSMsgType.BINARY:
+                    break
+                dec.stdin.write(msg.data)
+                dec.stdin.flush()
+                if len(latencies) >= 30 and not measuring:
+                    measuring.append(len(latencies))
+
+    measuring: list[int] = []
+    try:
+        _ok(rig.cloud.service("live_start_push", {"url_type": 1, "url": rx.url, "video_id": VIDEO}))
+        asyncio.run(feed())
+        _ok(rig.cloud.service("live_stop_push", {"video_id": VIDEO}))
+    finally:
+        if dec.stdin is not None:
+            dec.stdin.close()
+        dec.wait(5)
+        reader.join(5)
+        rx.close()
+    samples = latencies[measuring[0] if measuring else 0 :]
+    if len(samples) < seconds * 15:
+        raise AssertionError(f"only {len(samples)} preview frames decoded in {seconds} s")
+    return samples
+
+
 def _cpu(rig: Rig, tmp: Path, video: str, quality: int, seconds: float) -> tuple[float, int]:
     rx = Receiver(free_port(), tmp / f"cpu-{quality}.flv")
     try:
@@ -157,6 +212,12 @@ def run(cfg: Config) -> list[Row]:
             rows.append(Row("video", "glass to glass p50 (ms)", len(g2g), statistics.median(g2g), unit="ms",
                             note=f"timecode drawn → decoded at the receiver; p95 {p95:.0f} ms, "
                             f"min {g2g[0]:.0f} ms"))  # fmt: skip
+            preview = sorted(_preview_glass_to_glass(rig, window))
+            p95 = preview[int(len(preview) * 0.95)]
+            rows.append(Row("video", "console preview glass to glass p50 (ms)", len(preview),
+                            statistics.median(preview), unit="ms",
+                            note=f"WebSocket fMP4 (100 ms fragments) → decoded; p95 {p95:.0f} ms"),
+                        )  # fmt: skip
             cpu, frames = _cpu(rig, tmp, VIDEO, 0, window)
             rows.append(Row("video", "CPU, 720p30 test pattern, encoded (% core)", frames, cpu, unit="% core",
                             note="testsrc2 + drawtext + timecode + libx264 ultrafast 2 Mbps"))  # fmt: skip

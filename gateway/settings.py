@@ -378,6 +378,7 @@ class VideoSettings(BaseModel):
     threads: int = Field(2, ge=1, le=16, description="encoder threads per pipeline (CPU bound)")
     memory_mb: int = Field(1024, ge=128, description="address-space limit per pipeline (prlimit --as)")
     nice: int = Field(10, ge=0, le=19, description="pipelines run at this nice level")
+    preview: bool = Field(True, description="pipelines also feed the web console's preview (fragmented MP4)")
 
 
 class MetricsSettings(BaseModel):

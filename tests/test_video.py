@@ -8,6 +8,7 @@ streams in all). Skipped with the reason when ffmpeg/ffprobe are not installed (
 from __future__ import annotations
 
 import shutil
+import tempfile
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -91,6 +92,9 @@ def test_simulated_aircraft_streams_720p_and_stops_within_2s(rig: Rig) -> None:
         assert result(rig.cloud.service("live_start_push", start)) == 0
         other = {**start, "url": "rtmp://127.0.0.1:9/live/other"}
         assert result(rig.cloud.service("live_start_push", other)) == 399011
+        # the web console's preview of the same stream: an MP4 init segment, then fragments a browser's
+        # Media Source Extensions take (decoded here by ffprobe)
+        rig.preview(VIDEO, 20, rig.tmp / "preview.mp4")
         wait_until(lambda: rx.frames >= 30 * 5 + 15, 15, what="5 s of frames")
         stopped = time.monotonic()
         assert result(rig.cloud.service("live_stop_push", {"video_id": VIDEO})) == 0
@@ -102,6 +106,9 @@ def test_simulated_aircraft_streams_720p_and_stops_within_2s(rig: Rig) -> None:
     info = probe(rx.out)
     assert info["codec_name"] == "h264" and (info["width"], info["height"]) == ("1280", "720")
     assert int(info["nb_read_frames"]) >= 150, info
+    preview = probe(rig.tmp / "preview.mp4")
+    assert preview["codec_name"] == "h264" and preview["width"] == "1280"
+    assert int(preview["nb_read_frames"]) > 0
 
 
 def test_source_killed_mid_stream_restarts_and_status_shows_it(rig: Rig) -> None:
@@ -129,3 +136,43 @@ def test_source_killed_mid_stream_restarts_and_status_shows_it(rig: Rig) -> None
         rig.camera.kill()
     info = probe(rig.tmp / "camera-1.flv")
     assert info["codec_name"] == "h264" and info["width"] == "640"  # passed through, not re-encoded
+
+
+@pytest.mark.browser
+def test_the_console_plays_a_running_stream(rig: Rig) -> None:
+    """Debian's Chromium opens the console, picks the running video and plays it (Media Source Extensions)."""
+    from tests.test_console_browser import CHROMIUM, CHROMIUM_ARGS
+
+    if not CHROMIUM.exists():
+        pytest.skip(f"{CHROMIUM} is missing: install Debian's chromium (make test does, as root)")
+    from playwright.sync_api import sync_playwright
+
+    rx = Receiver(free_port(), rig.tmp / "browser.flv")
+    try:
+        start = {"url_type": 1, "url": rx.url, "video_id": VIDEO}
+        assert result(rig.cloud.service("live_start_push", start)) == 0
+        with tempfile.TemporaryDirectory(prefix="djigw-chromium-") as profile, sync_playwright() as pw:
+            try:
+                browser = pw.chromium.launch_persistent_context(
+                    profile, executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS
+                )
+            except Exception as exc:
+                pytest.skip(f"Chromium at {CHROMIUM} does not start here: {exc}")
+            try:
+                page = browser.new_page()
+                page.goto(f"http://127.0.0.1:{rig.web_port}/")
+                page.wait_for_selector("#video:not([hidden])", timeout=10_000)
+                options = "[...document.querySelectorAll('#video-list option')]"
+                live = f"() => {options}.some(o => o.value && !o.disabled)"
+                wait_until(lambda: page.evaluate(live), 10, what="the running video in the list")
+                page.select_option("#video-list", VIDEO)
+                playing = "() => document.querySelector('#video-player').currentTime > 1.0"
+                wait_until(lambda: page.evaluate(playing), 15, what="the preview playing")
+                size = page.evaluate("() => [document.querySelector('#video-player').videoWidth, "
+                                     "document.querySelector('#video-player').videoHeight]")  # fmt: skip
+                assert size == [1280, 720]
+            finally:
+                browser.close()
+        assert result(rig.cloud.service("live_stop_push", {"video_id": VIDEO})) == 0
+    finally:
+        rx.close()

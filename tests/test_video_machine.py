@@ -7,6 +7,7 @@ import pytest
 from adapters.clock import ManualClock
 from gateway.video.engine import Pipeline, ProgressParser, build_command, describe, read_timecode, redact_url
 from gateway.video.machine import Backoff, Kill, Phase, Spawn, StreamMachine, Target
+from gateway.video.preview import BoxSplitter, PreviewFeed
 from schemas import TopicKind, default_registry
 from schemas.live import parse_video_id
 
@@ -150,3 +151,37 @@ def test_the_contract_reads_tolerantly_and_refuses_nonsense() -> None:
         with pytest.raises(ValueError):
             start({**ok, **bad})
     assert parse_video_id("1ZNDH1D0010098/39-0-7/normal-0") == ("1ZNDH1D0010098", "39-0-7", "normal-0")
+
+
+def _box(kind: bytes, body: bytes = b"") -> bytes:
+    return (8 + len(body)).to_bytes(4, "big") + kind + body
+
+
+def test_preview_segments_split_at_any_offset() -> None:
+    init = _box(b"ftyp", b"isom") + _box(b"moov", b"avcC\x01\x42\xc0\x1f")
+    frags = [_box(b"moof", bytes([i])) + _box(b"mdat", bytes(50 + i)) for i in range(3)]
+    stream = init + b"".join(frags)
+    for cut in range(1, len(stream)):
+        splitter = BoxSplitter()
+        out = splitter.feed(stream[:cut]) + splitter.feed(stream[cut:])
+        assert out == [("init", init)] + [("fragment", f) for f in frags]
+    with pytest.raises(ValueError):
+        BoxSplitter().feed(b"\x00\x00\x00\x02moov")  # a box shorter than its header
+
+
+def test_preview_feed_gives_late_pages_the_init_and_ends_them_on_restart() -> None:
+    feed = PreviewFeed()
+    init = _box(b"ftyp") + _box(b"moov")
+    frag = _box(b"moof") + _box(b"mdat", b"x")
+    early: list[bytes] = []
+    feed.subscribe(early.append)
+    feed.feed(init + frag)
+    late: list[bytes] = []
+    unsubscribe = feed.subscribe(late.append)
+    feed.feed(frag)
+    assert early == [init, frag, frag] and late == [init, frag]
+    unsubscribe()
+    feed.feed(frag)
+    assert late == [init, frag]
+    feed.restart()
+    assert early[-1] == b"" and feed.init is None and feed.subscribers == []

@@ -114,7 +114,7 @@ class Rig:
         self.camera = Camera(free_port(), camera_size)
         doc = simulated_settings({"broker": {"url": f"mqtt://127.0.0.1:{broker.port}"}, "osd_period": 1.0})
         doc["devices"] = [d for d in doc["devices"] if d["type"] == "osdk"]
-        doc["metrics"] = {"enabled": False}
+        doc["metrics"] = {"enabled": True, "host": "127.0.0.1", "port": 0}  # the console's video preview
         doc["video"]["sources"] = [s for s in doc["video"]["sources"] if s["sn"] == SIM_AIRCRAFT_SN] + [
             {"sn": SIM_AIRCRAFT_SN, "camera_index": "0-0-1", "codec": "h264",
              "source": f"tcp://127.0.0.1:{self.camera.port}"},
@@ -135,6 +135,38 @@ class Rig:
                 if entry["video_id"] == video_id and (not out or out[-1] != pair):
                     out.append(pair)
         return out
+
+    @property
+    def web_port(self) -> int:
+        obs = self.gw.app.observability if self.gw.app is not None else None
+        assert obs is not None and obs.port
+        return int(obs.port)
+
+    def preview(self, video_id: str, fragments: int, out: Path, timeout: float = 10.0) -> float:
+        """Read ``fragments`` fragments of the console's preview of ``video_id`` into ``out`` (init segment
+        first); returns the seconds until the first fragment arrived."""
+        import asyncio
+
+        import aiohttp
+
+        async def read() -> float:
+            url = f"http://127.0.0.1:{self.web_port}/api/video?id={video_id}"
+            started = time.monotonic()
+            first = 0.0
+            async with aiohttp.ClientSession() as session, session.ws_connect(url) as ws:
+                with out.open("wb") as f:
+                    n = -1  # the init segment first
+                    while n < fragments:
+                        msg = await asyncio.wait_for(ws.receive(), timeout)
+                        if msg.type != aiohttp.WSMsgType.BINARY:
+                            raise AssertionError(f"preview ended early: {msg.type}")
+                        f.write(msg.data)
+                        n += 1
+                        if n == 1:
+                            first = time.monotonic() - started
+            return first
+
+        return asyncio.run(read())
 
     def pipeline_pids(self) -> dict[str, int]:
         """The running ffmpeg processes of the gateway's live service, by video id."""

@@ -60,6 +60,7 @@ class Pipeline:
     label: str = ""  # drawn on a test pattern (the device's serial number)
     osd_file: str | None = None  # a text file ffmpeg re-reads each frame (osd values), test pattern only
     threads: int = 2
+    preview: bool = False  # also fragmented MP4 on stdout (the web console's preview), besides the target
 
     @property
     def passthrough(self) -> bool:
@@ -144,10 +145,21 @@ def _network_input(source: str) -> list[str]:
     return [*opts, "-i", source]
 
 
-def build_command(ffmpeg: str, p: Pipeline) -> list[str]:
-    """The ffmpeg argument vector of pipeline ``p`` (progress on stdout, errors on stderr)."""
+#: The preview's fragments: one at least every 100 ms (each begins at a keyframe or not: MSE takes both).
+MP4_FLAGS = "frag_keyframe+empty_moov+default_base_moof"
+PREVIEW_MP4 = f"f=mp4:movflags={MP4_FLAGS}:frag_duration=100000:onfail=ignore"
+
+
+def _tee_escape(url: str) -> str:
+    """A URL as one tee slave: the tee muxer's special characters escaped."""
+    return "".join("\\" + ch if ch in "|[]\\" else ch for ch in url)
+
+
+def build_command(ffmpeg: str, p: Pipeline, progress_fd: int = 1) -> list[str]:
+    """The ffmpeg argument vector of pipeline ``p``: progress on ``progress_fd``, errors on stderr, the
+    preview (when asked; then ``progress_fd`` must not be 1) as fragmented MP4 on stdout."""
     cmd = [ffmpeg, "-hide_banner", "-nostdin", "-loglevel", "error", "-nostats",
-           "-progress", "pipe:1", "-stats_period", "0.25"]  # fmt: skip
+           "-progress", f"pipe:{progress_fd}", "-stats_period", "0.25"]  # fmt: skip
     filters: list[str] = []
     if p.source.startswith("test:"):
         args, filters = _test_input(p.source[len("test:") :], p)
@@ -173,8 +185,16 @@ def build_command(ffmpeg: str, p: Pipeline) -> list[str]:
         cmd += ["-c:v", "libx264", "-preset", "ultrafast", "-tune", "zerolatency", "-profile:v", "baseline",
                 "-g", str(TEST_RATE), "-bf", "0", "-b:v", f"{kbps}k", "-maxrate", f"{kbps}k",
                 "-bufsize", f"{kbps // 2}k", "-threads", str(p.threads)]  # fmt: skip
-    cmd += ["-flvflags", "no_duration_filesize", "-f", "flv", p.url]
-    return cmd
+    flv = [*cmd, "-flvflags", "no_duration_filesize", "-f", "flv", p.url]
+    if not p.preview:
+        return flv
+    if p.passthrough:  # a copy goes to two outputs as is (the tee muxer is for sharing one encoder)
+        return [*flv, "-map", "0:v:0", "-c:v", "copy", "-movflags", MP4_FLAGS, "-frag_duration", "100000",
+                "-f", "mp4", "pipe:1"]  # fmt: skip
+    cmd += ["-flags", "+global_header"]  # both outputs take the encoder's headers out of band
+    # the target first: its failure ends the pipeline (onfail=abort); the preview's is ignored
+    target = f"[f=flv:flvflags=no_duration_filesize:onfail=abort]{_tee_escape(p.url)}"
+    return [*cmd, "-f", "tee", f"{target}|[{PREVIEW_MP4}]pipe:1"]
 
 
 def redact_url(url: str) -> str:

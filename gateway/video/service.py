@@ -26,7 +26,7 @@ import signal
 import tempfile
 from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,7 @@ from gateway.metrics import Metrics
 from gateway.settings import VideoSettings, VideoSource
 from gateway.video.engine import Pipeline, ProgressParser, build_command, describe, redact_url
 from gateway.video.machine import Backoff, Kill, Phase, Spawn, StreamMachine, Target
+from gateway.video.preview import PreviewFeed
 from schemas.live import LiveLensChange, LiveSetQuality, LiveStartPush, LiveStopPush, UrlType
 from schemas.results import ResultCode
 
@@ -64,19 +65,29 @@ _REFUSED_TYPES = {
 class _Video:
     source: VideoSource
     machine: StreamMachine
+    preview: PreviewFeed = field(default_factory=PreviewFeed)
     osd_file: Path | None = None
     changed: asyncio.Event | None = None  # set on every progress/exit (a start waiting for its outcome)
 
 
 class _Process:
-    """One running ffmpeg: spawned, read, stopped. Reports to ``on_progress`` / ``on_exit``."""
+    """One running ffmpeg: spawned, read, stopped. Reports to ``on_progress`` / ``on_exit``; its stdout (the
+    preview's fragmented MP4, when ``preview`` is given) goes to ``preview``."""
 
-    def __init__(self, cmd: list[str], secret: str, on_progress: Callable[[int], None],
-                 on_exit: Callable[[str], None]) -> None:  # fmt: skip
-        self.cmd = cmd
+    def __init__(
+        self,
+        build: Callable[[int], list[str]],
+        secret: str,
+        on_progress: Callable[[int], None],
+        on_exit: Callable[[str], None],
+        preview: PreviewFeed | None = None,
+    ) -> None:
+        self.build = build  # progress fd → the command line
+        self.cmd: list[str] = []
         self.secret = secret
         self.on_progress = on_progress
         self.on_exit = on_exit
+        self.preview = preview
         self.proc: asyncio.subprocess.Process | None = None
         self.errors: deque[str] = deque(maxlen=5)
         self.task: asyncio.Task[None] | None = None
@@ -87,17 +98,24 @@ class _Process:
 
     async def _run(self) -> None:
         reason = "exited"
+        progress_r, progress_w = os.pipe()  # -progress on a pipe of its own: stdout carries the preview
         try:
+            self.cmd = self.build(progress_w)
             self.proc = await asyncio.create_subprocess_exec(
                 *self.cmd,
                 stdin=asyncio.subprocess.DEVNULL,
-                stdout=asyncio.subprocess.PIPE,
+                stdout=asyncio.subprocess.PIPE if self.preview is not None else asyncio.subprocess.DEVNULL,
                 stderr=asyncio.subprocess.PIPE,
+                pass_fds=(progress_w,),
                 start_new_session=True,  # a Ctrl-C to the gateway is not the pipeline's to handle
             )
+            os.close(progress_w)
+            progress_w = -1
             if self.killed:
                 self._signal(signal.SIGKILL)
-            await asyncio.gather(self._read_progress(), self._read_errors())
+            progress = await _pipe_reader(progress_r)
+            progress_r = -1  # owned by the reader's transport now
+            await asyncio.gather(self._read_progress(progress), self._read_errors(), self._read_preview())
             code = await self.proc.wait()
             last = self.errors[-1] if self.errors else ""
             reason = f"ffmpeg exited {code}" + (f": {last}" if last else "")
@@ -108,15 +126,35 @@ class _Process:
         except asyncio.CancelledError:
             self._signal(signal.SIGKILL)
             raise
+        finally:
+            for fd in (progress_r, progress_w):
+                if fd >= 0:
+                    os.close(fd)
         self.on_exit(reason)
 
-    async def _read_progress(self) -> None:
-        assert self.proc is not None and self.proc.stdout is not None
+    async def _read_progress(self, reader: tuple[asyncio.StreamReader, asyncio.BaseTransport]) -> None:
+        stream, transport = reader
         parser = ProgressParser()
-        async for raw in self.proc.stdout:
-            frames = parser.feed(raw.decode("ascii", "replace"))
-            if frames is not None:
-                self.on_progress(frames)
+        try:
+            async for raw in stream:
+                frames = parser.feed(raw.decode("ascii", "replace"))
+                if frames is not None:
+                    self.on_progress(frames)
+        finally:
+            transport.close()
+
+    async def _read_preview(self) -> None:
+        if self.preview is None or self.proc is None or self.proc.stdout is None:
+            return
+        while chunk := await self.proc.stdout.read(65536):
+            try:
+                self.preview.feed(chunk)
+            except ValueError as exc:  # a broken MP4: the preview stops, the stream goes on
+                log.warning("preview stopped: %s", exc)
+                self.preview = None
+                while await self.proc.stdout.read(65536):  # keep draining: ffmpeg must never block on it
+                    pass
+                return
 
     async def _read_errors(self) -> None:
         assert self.proc is not None and self.proc.stderr is not None
@@ -142,6 +180,16 @@ class _Process:
     async def wait(self) -> None:
         if self.task is not None:
             await asyncio.wait({self.task})
+
+
+async def _pipe_reader(fd: int) -> tuple[asyncio.StreamReader, asyncio.BaseTransport]:
+    """A StreamReader over the read end of a pipe, on the running loop (never a blocking read)."""
+    loop = asyncio.get_running_loop()
+    reader = asyncio.StreamReader(limit=2**16)
+    transport, _ = await loop.connect_read_pipe(
+        lambda: asyncio.StreamReaderProtocol(reader), os.fdopen(fd, "rb", buffering=0)
+    )
+    return reader, transport
 
 
 class LiveService:
@@ -339,6 +387,23 @@ class LiveService:
                     video.changed.clear()
                     await video.changed.wait()
 
+    # -- the web console's preview (called on this loop by gateway/web/video.py) -------------------
+    def previews(self) -> list[dict[str, Any]]:
+        """Every video and whether it can be watched now."""
+        return [
+            {"video_id": vid, "sn": v.source.sn, "live": v.machine.phase is Phase.LIVE,
+             "preview": v.preview.init is not None}
+            for vid, v in self.videos.items()
+        ]  # fmt: skip
+
+    def subscribe(self, video_id: str, send: Callable[[bytes], None]) -> Callable[[], None] | None:
+        """``send`` gets the video's preview (init segment, then fragments; ``b""`` at its end); None when
+        the video is unknown or not streaming."""
+        video = self.videos.get(video_id)
+        if video is None or not video.machine.active or not self.settings.preview:
+            return None
+        return video.preview.subscribe(send)
+
     # -- the transport ----------------------------------------------------------------------------
     def _wrapper_prefix(self) -> list[str]:
         prefix: list[str] = []
@@ -359,6 +424,8 @@ class LiveService:
                 proc = self._procs.get((vid, action.generation))
                 if proc is not None:
                     proc.kill()
+                if not video.machine.active:
+                    video.preview.restart()  # the pages watching are told the stream ended
                 continue
             target = action.target
             source = self._source_for(video, target.lens)
@@ -377,11 +444,20 @@ class LiveService:
                 if video.osd_file is not None and source.startswith("test:")
                 else None,
                 threads=self.settings.threads,
+                preview=self.settings.preview,
             )
-            cmd = self._wrapper + build_command(self.settings.ffmpeg, pipeline)
             gen = action.generation
-            log.debug("pipeline %s #%d: %s", vid, gen, describe(cmd, target.url))
-            proc = _Process(cmd, target.url, *self._callbacks(video, gen))
+            preview = None
+            if self.settings.preview:
+                video.preview.restart()
+                preview = video.preview
+
+            def build(progress_fd: int, p: Pipeline = pipeline, vid: str = vid, gen: int = gen) -> list[str]:
+                cmd = self._wrapper + build_command(self.settings.ffmpeg, p, progress_fd)
+                log.debug("pipeline %s #%d: %s", vid, gen, describe(cmd, p.url))
+                return cmd
+
+            proc = _Process(build, target.url, *self._callbacks(video, gen), preview=preview)
             self._procs[(vid, gen)] = proc
             proc.start()
 
