@@ -366,7 +366,11 @@ class VideoSettings(BaseModel):
     """Live video (``live_*``): the sources and the supervised ffmpeg pipelines (docs/video.md)."""
 
     model_config = _STRICT
-    sources: list[VideoSource] = Field(default_factory=list, max_length=64)
+    sources: list[VideoSource] = Field(
+        default_factory=list,
+        max_length=64,
+        description="[[video.sources]]: sn, camera_index, video_index, source, codec, lenses (docs/video.md)",
+    )
     ffmpeg: str = Field("ffmpeg", description="the ffmpeg executable (apt-get install ffmpeg)")
     max_streams: int = Field(2, ge=1, le=16, description="streams at once (coexist_video_number_max)")
     start_wait: float = Field(
