@@ -18,7 +18,7 @@ import pytest
 from gateway.cli.run import SIM_AIRCRAFT_SN
 from gateway.local_broker import LocalBroker
 from tests.support import wait_until
-from tests.video_rig import CAMERA, VIDEO, Receiver, Rig, free_port, probe
+from tests.video_rig import CAMERA, VIDEO, Listener, Receiver, Rig, free_port, probe
 
 pytestmark = [
     pytest.mark.broker,
@@ -174,5 +174,44 @@ def test_the_console_plays_a_running_stream(rig: Rig) -> None:
             finally:
                 browser.close()
         assert result(rig.cloud.service("live_stop_push", {"video_id": VIDEO})) == 0
+    finally:
+        rx.close()
+
+
+def test_quality_and_lens_changes_replace_the_pipeline(rig: Rig) -> None:
+    rtmp = Listener(free_port(), rig.tmp, "changes")
+    try:
+        start = {"url_type": 1, "url": rtmp.url, "video_id": VIDEO, "video_quality": 0}
+        assert result(rig.cloud.service("live_start_push", start)) == 0
+        wait_until(lambda: rtmp.receivers[0].frames >= 15, 8, what="frames at quality 0")
+        assert result(rig.cloud.service("live_set_quality", {"video_id": VIDEO, "video_quality": 1})) == 0
+        wait_until(lambda: any(rx.frames >= 15 for rx in rtmp.receivers[1:]), 10, what="frames at quality 1")
+        smooth = next(rx for rx in rtmp.receivers[1:] if rx.frames >= 15)
+        info = probe(smooth.out)
+        assert (info["width"], info["height"]) == ("960", "540")  # DJI's "smooth": 960×540, 512 kbps
+        assert result(rig.cloud.service("live_lens_change", {"video_id": VIDEO, "video_type": "ir"})) == 0
+        wait_until(
+            lambda: (rig.entry(VIDEO) or {}).get("video_type") == "ir" and rig.entry(VIDEO)["status"] == 1,
+            10,
+            what="live_status: ir lens, streaming",
+        )
+        assert rig.entry(VIDEO)["video_quality"] == 1
+        assert result(rig.cloud.service("live_stop_push", {"video_id": VIDEO})) == 0
+    finally:
+        rtmp.close()
+
+
+def test_a_device_going_offline_stops_its_streams(rig: Rig) -> None:
+    """Last in the module: the simulated aircraft is stopped."""
+    rx = Receiver(free_port(), rig.tmp / "offline.flv")
+    try:
+        start = {"url_type": 1, "url": rx.url, "video_id": VIDEO}
+        assert result(rig.cloud.service("live_start_push", start)) == 0
+        wait_until(lambda: rx.frames >= 15, 8, what="frames")
+        for sim in rig.sims:
+            sim.stop()  # silent for osdk.silence_timeout (2 s): offline
+        wait_until(lambda: rx.ended_at is not None, 8, what="the stream's end")
+        wait_until(lambda: rig.status(VIDEO)[-1] == (0, 325012), 3, what="live_status: device not connected")
+        assert result(rig.cloud.service("live_start_push", start)) == 325012
     finally:
         rx.close()

@@ -75,6 +75,36 @@ class Receiver:
         self._reader.join(5)
 
 
+class Listener:
+    """An RTMP server for one publish after another (a pipeline replaced by a quality or lens change
+    publishes again): a Receiver per publish, ``name-<n>.flv``."""
+
+    def __init__(self, port: int, tmp: Path, name: str) -> None:
+        self.port, self.tmp, self.name = port, tmp, name
+        self.receivers: list[Receiver] = []
+        self._stop = threading.Event()
+        self.receivers.append(Receiver(port, tmp / f"{name}-0.flv"))
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+        self._thread.start()
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            self.receivers[-1].proc.wait()
+            if self._stop.is_set():
+                break
+            self.receivers.append(Receiver(self.port, self.tmp / f"{self.name}-{len(self.receivers)}.flv"))
+
+    @property
+    def url(self) -> str:
+        return self.receivers[0].url
+
+    def close(self) -> None:
+        self._stop.set()
+        for rx in list(self.receivers):
+            rx.close()
+        self._thread.join(5)
+
+
 def probe(path: Path) -> dict[str, str]:
     out = subprocess.run(
         ["ffprobe", "-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries",
@@ -115,7 +145,7 @@ class Rig:
         doc = simulated_settings({"broker": {"url": f"mqtt://127.0.0.1:{broker.port}"}, "osd_period": 1.0})
         doc["devices"] = [d for d in doc["devices"] if d["type"] == "osdk"]
         doc["metrics"] = {"enabled": True, "host": "127.0.0.1", "port": 0}  # the console's video preview
-        doc["video"]["sources"] = [s for s in doc["video"]["sources"] if s["sn"] == SIM_AIRCRAFT_SN] + [
+        doc["video"]["sources"] = [  # beside the aircraft's test pattern (video.test_pattern)
             {"sn": SIM_AIRCRAFT_SN, "camera_index": "0-0-1", "codec": "h264",
              "source": f"tcp://127.0.0.1:{self.camera.port}"},
         ]  # fmt: skip
@@ -125,6 +155,14 @@ class Rig:
         self.cloud = CloudClient(broker.host, broker.port, self.settings.gateway_sn)
         self.gw = GatewayThread(self.settings).start()
         self.gw_state = f"{self.settings.gateway_sn}/state"
+
+    def entry(self, video_id: str) -> dict[str, Any] | None:
+        """The last ``live_status`` entry published for ``video_id``."""
+        for body in reversed(self.cloud.find(self.gw_state, lambda b: "live_status" in b["data"])):
+            for entry in body["data"]["live_status"]:
+                if entry["video_id"] == video_id:
+                    return dict(entry)
+        return None
 
     def status(self, video_id: str) -> list[tuple[int, int]]:
         """Every (status, error_status) the gateway has published for ``video_id``, in order."""

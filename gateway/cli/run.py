@@ -65,9 +65,7 @@ def simulated_settings(base: dict[str, Any]) -> dict[str, Any]:
     doc["devices"] = devices
     # every simulated device streams a test pattern (its sn, the time, osd values drawn in: docs/video.md)
     video = dict(doc.get("video", {}))
-    video["sources"] = list(video.get("sources", [])) + [
-        {"sn": d["sn"], "camera_index": d.get("payload_index", "0-0-0"), "source": "test:"} for d in tour
-    ]
+    video.setdefault("test_pattern", True)
     video.setdefault("max_streams", len(tour))
     doc["video"] = video
     return doc

@@ -22,22 +22,20 @@ import contextlib
 import logging
 import os
 import shutil
-import signal
 import tempfile
-from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gateway import logcontext
 from gateway.clock import Clock
 from gateway.devices import DeviceTable
 from gateway.metrics import Metrics
 from gateway.settings import VideoSettings, VideoSource
-from gateway.video.engine import Pipeline, ProgressParser, build_command, describe, redact_url
+from gateway.video.engine import Pipeline, build_command, describe, redact_url
 from gateway.video.machine import Backoff, Kill, Phase, Spawn, StreamMachine, Target
 from gateway.video.preview import PreviewFeed
+from gateway.video.process import KILL_GRACE, PipelineProcess
 from schemas.live import LiveLensChange, LiveSetQuality, LiveStartPush, LiveStopPush, UrlType
 from schemas.results import ResultCode
 
@@ -47,7 +45,6 @@ __all__ = ["METHODS", "LiveService"]
 
 METHODS = frozenset({"live_start_push", "live_stop_push", "live_set_quality", "live_lens_change"})
 TICK = 0.25  # s: retries, stalls, device-offline checks, the osd text of test patterns
-KILL_GRACE = 1.5  # s between SIGTERM (ffmpeg closes the stream cleanly) and SIGKILL
 STOP_WAIT = 2.0  # s a live_stop_push waits for the pipeline to end before answering
 
 Result = tuple[int, dict[str, Any] | None]
@@ -70,128 +67,6 @@ class _Video:
     changed: asyncio.Event | None = None  # set on every progress/exit (a start waiting for its outcome)
 
 
-class _Process:
-    """One running ffmpeg: spawned, read, stopped. Reports to ``on_progress`` / ``on_exit``; its stdout (the
-    preview's fragmented MP4, when ``preview`` is given) goes to ``preview``."""
-
-    def __init__(
-        self,
-        build: Callable[[int], list[str]],
-        secret: str,
-        on_progress: Callable[[int], None],
-        on_exit: Callable[[str], None],
-        preview: PreviewFeed | None = None,
-    ) -> None:
-        self.build = build  # progress fd → the command line
-        self.cmd: list[str] = []
-        self.secret = secret
-        self.on_progress = on_progress
-        self.on_exit = on_exit
-        self.preview = preview
-        self.proc: asyncio.subprocess.Process | None = None
-        self.errors: deque[str] = deque(maxlen=5)
-        self.task: asyncio.Task[None] | None = None
-        self.killed = False
-
-    def start(self) -> None:
-        self.task = asyncio.get_running_loop().create_task(self._run(), name="ffmpeg")
-
-    async def _run(self) -> None:
-        reason = "exited"
-        progress_r, progress_w = os.pipe()  # -progress on a pipe of its own: stdout carries the preview
-        try:
-            self.cmd = self.build(progress_w)
-            self.proc = await asyncio.create_subprocess_exec(
-                *self.cmd,
-                stdin=asyncio.subprocess.DEVNULL,
-                stdout=asyncio.subprocess.PIPE if self.preview is not None else asyncio.subprocess.DEVNULL,
-                stderr=asyncio.subprocess.PIPE,
-                pass_fds=(progress_w,),
-                start_new_session=True,  # a Ctrl-C to the gateway is not the pipeline's to handle
-            )
-            os.close(progress_w)
-            progress_w = -1
-            if self.killed:
-                self._signal(signal.SIGKILL)
-            progress = await _pipe_reader(progress_r)
-            progress_r = -1  # owned by the reader's transport now
-            await asyncio.gather(self._read_progress(progress), self._read_errors(), self._read_preview())
-            code = await self.proc.wait()
-            last = self.errors[-1] if self.errors else ""
-            reason = f"ffmpeg exited {code}" + (f": {last}" if last else "")
-        except FileNotFoundError:
-            reason = f"{self.cmd[0]} not found (apt-get install ffmpeg)"
-        except OSError as exc:
-            reason = f"could not start the pipeline: {exc.strerror}"
-        except asyncio.CancelledError:
-            self._signal(signal.SIGKILL)
-            raise
-        finally:
-            for fd in (progress_r, progress_w):
-                if fd >= 0:
-                    os.close(fd)
-        self.on_exit(reason)
-
-    async def _read_progress(self, reader: tuple[asyncio.StreamReader, asyncio.BaseTransport]) -> None:
-        stream, transport = reader
-        parser = ProgressParser()
-        try:
-            async for raw in stream:
-                frames = parser.feed(raw.decode("ascii", "replace"))
-                if frames is not None:
-                    self.on_progress(frames)
-        finally:
-            transport.close()
-
-    async def _read_preview(self) -> None:
-        if self.preview is None or self.proc is None or self.proc.stdout is None:
-            return
-        while chunk := await self.proc.stdout.read(65536):
-            try:
-                self.preview.feed(chunk)
-            except ValueError as exc:  # a broken MP4: the preview stops, the stream goes on
-                log.warning("preview stopped: %s", exc)
-                self.preview = None
-                while await self.proc.stdout.read(65536):  # keep draining: ffmpeg must never block on it
-                    pass
-                return
-
-    async def _read_errors(self) -> None:
-        assert self.proc is not None and self.proc.stderr is not None
-        async for raw in self.proc.stderr:
-            line = raw.decode("utf-8", "replace").strip()
-            if line:
-                if self.secret:
-                    line = line.replace(self.secret, redact_url(self.secret))
-                self.errors.append(logcontext.scrub(line)[:200])
-
-    def _signal(self, sig: int) -> None:
-        if self.proc is not None and self.proc.returncode is None:
-            with contextlib.suppress(ProcessLookupError):
-                self.proc.send_signal(sig)
-
-    def kill(self) -> None:
-        """SIGTERM (ffmpeg ends the stream cleanly), SIGKILL if it is still there after KILL_GRACE."""
-        self.killed = True
-        self._signal(signal.SIGTERM)
-        loop = asyncio.get_running_loop()
-        loop.call_later(KILL_GRACE, self._signal, signal.SIGKILL)
-
-    async def wait(self) -> None:
-        if self.task is not None:
-            await asyncio.wait({self.task})
-
-
-async def _pipe_reader(fd: int) -> tuple[asyncio.StreamReader, asyncio.BaseTransport]:
-    """A StreamReader over the read end of a pipe, on the running loop (never a blocking read)."""
-    loop = asyncio.get_running_loop()
-    reader = asyncio.StreamReader(limit=2**16)
-    transport, _ = await loop.connect_read_pipe(
-        lambda: asyncio.StreamReaderProtocol(reader), os.fdopen(fd, "rb", buffering=0)
-    )
-    return reader, transport
-
-
 class LiveService:
     methods = METHODS
 
@@ -210,13 +85,21 @@ class LiveService:
         self.metrics = metrics
         self.publish_state = publish_state
         backoff = Backoff(settings.backoff_initial, settings.backoff_max)
+        sources = list(settings.sources)
+        if settings.test_pattern:  # run --simulate: every device without a source shows a moving pattern
+            have = {s.sn for s in sources}
+            sources += [
+                VideoSource(sn=a.info.sn, camera_index=a.info.payload_index or "0-0-0", source="test:")
+                for a in devices
+                if a.info.sn not in have
+            ]
         self.videos: dict[str, _Video] = {
             s.video_id: _Video(
                 s, StreamMachine(s.video_id, backoff=backoff, stall_timeout=settings.stall_timeout)
             )
-            for s in settings.sources
+            for s in sources
         }
-        self._procs: dict[tuple[str, int], _Process] = {}
+        self._procs: dict[tuple[str, int], PipelineProcess] = {}
         self._published: list[dict[str, Any]] | None = None
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
         self._wrapper = self._wrapper_prefix()
@@ -457,7 +340,7 @@ class LiveService:
                 log.debug("pipeline %s #%d: %s", vid, gen, describe(cmd, p.url))
                 return cmd
 
-            proc = _Process(build, target.url, *self._callbacks(video, gen), preview=preview)
+            proc = PipelineProcess(build, target.url, *self._callbacks(video, gen), preview=preview)
             self._procs[(vid, gen)] = proc
             proc.start()
 
