@@ -372,7 +372,7 @@ class VideoSettings(BaseModel):
         description="[[video.sources]]: sn, camera_index, video_index, source, codec, lenses (docs/video.md)",
     )
     test_pattern: bool = Field(
-        False, description="every device without a source streams a test pattern (run --simulate sets it)"
+        False, description="every device also has a test-pattern video (run --simulate sets it)"
     )
     ffmpeg: str = Field("ffmpeg", description="the ffmpeg executable (apt-get install ffmpeg)")
     max_streams: int = Field(2, ge=1, le=16, description="streams at once (coexist_video_number_max)")

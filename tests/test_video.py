@@ -187,8 +187,6 @@ def test_quality_and_lens_changes_replace_the_pipeline(rig: Rig) -> None:
         assert result(rig.cloud.service("live_set_quality", {"video_id": VIDEO, "video_quality": 1})) == 0
         wait_until(lambda: any(rx.frames >= 15 for rx in rtmp.receivers[1:]), 10, what="frames at quality 1")
         smooth = next(rx for rx in rtmp.receivers[1:] if rx.frames >= 15)
-        info = probe(smooth.out)
-        assert (info["width"], info["height"]) == ("960", "540")  # DJI's "smooth": 960×540, 512 kbps
         assert result(rig.cloud.service("live_lens_change", {"video_id": VIDEO, "video_type": "ir"})) == 0
         wait_until(
             lambda: (rig.entry(VIDEO) or {}).get("video_type") == "ir" and rig.entry(VIDEO)["status"] == 1,
@@ -197,8 +195,13 @@ def test_quality_and_lens_changes_replace_the_pipeline(rig: Rig) -> None:
         )
         assert rig.entry(VIDEO)["video_quality"] == 1
         assert result(rig.cloud.service("live_stop_push", {"video_id": VIDEO})) == 0
+        wait_until(
+            lambda: smooth.ended_at is not None, 5, what="the smooth stream's end"
+        )  # its file is whole
     finally:
         rtmp.close()
+    info = probe(smooth.out)
+    assert (info["width"], info["height"]) == ("960", "540")  # DJI's "smooth": 960×540, 512 kbps
 
 
 def test_a_device_going_offline_stops_its_streams(rig: Rig) -> None:

@@ -86,13 +86,14 @@ class LiveService:
         self.publish_state = publish_state
         backoff = Backoff(settings.backoff_initial, settings.backoff_max)
         sources = list(settings.sources)
-        if settings.test_pattern:  # run --simulate: every device without a source shows a moving pattern
-            have = {s.sn for s in sources}
-            sources += [
-                VideoSource(sn=a.info.sn, camera_index=a.info.payload_index or "0-0-0", source="test:")
-                for a in devices
-                if a.info.sn not in have
-            ]
+        if settings.test_pattern:  # run --simulate: every device shows a moving pattern, beside its sources
+            have = {s.video_id for s in sources}
+            for a in devices:
+                pattern = VideoSource(
+                    sn=a.info.sn, camera_index=a.info.payload_index or "0-0-0", source="test:"
+                )
+                if pattern.video_id not in have:
+                    sources.append(pattern)
         self.videos: dict[str, _Video] = {
             s.video_id: _Video(
                 s, StreamMachine(s.video_id, backoff=backoff, stall_timeout=settings.stall_timeout)
