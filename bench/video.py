@@ -12,7 +12,8 @@ ffmpeg of its own serving 1280×720 30 fps H.264 over TCP). Receivers are ffmpeg
   blocks back when the frame arrives: latency = arrival − drawn. Both clocks are this machine's.
 * **CPU per 720p30 stream** (the camera's rows in a full run only): the pipeline process's user+system
   time from ``/proc/<pid>/stat`` over a window: the test pattern (draw + encode), the camera re-encoded
-  (``video_quality`` 2: decode, scale, encode at 1 Mbps) and the camera passed through (``video_quality`` 0, codec h264: ``-c:v copy``).
+  (``video_quality`` 2: decode, scale, encode at 1 Mbps) and the camera passed through (``video_quality``
+  0, codec h264: ``-c:v copy``).
 """
 
 from __future__ import annotations
