@@ -185,7 +185,7 @@ def test_quality_and_lens_changes_replace_the_pipeline(rig: Rig) -> None:
         assert result(rig.cloud.service("live_start_push", start)) == 0
         wait_until(lambda: rtmp.receivers[0].frames >= 15, 8, what="frames at quality 0")
         assert result(rig.cloud.service("live_set_quality", {"video_id": VIDEO, "video_quality": 1})) == 0
-        wait_until(lambda: any(rx.frames >= 15 for rx in rtmp.receivers[1:]), 10, what="frames at quality 1")
+        wait_until(lambda: any(rx.frames >= 15 for rx in rtmp.receivers[1:]), 15, what="frames at quality 1")
         smooth = next(rx for rx in rtmp.receivers[1:] if rx.frames >= 15)
         assert result(rig.cloud.service("live_lens_change", {"video_id": VIDEO, "video_type": "ir"})) == 0
         wait_until(
@@ -195,10 +195,11 @@ def test_quality_and_lens_changes_replace_the_pipeline(rig: Rig) -> None:
         )
         assert rig.entry(VIDEO)["video_quality"] == 1
         assert result(rig.cloud.service("live_stop_push", {"video_id": VIDEO})) == 0
-        wait_until(
-            lambda: smooth.ended_at is not None, 5, what="the smooth stream's end"
-        )  # its file is whole
+        wait_until(lambda: smooth.ended_at is not None, 5, what="the smooth stream's end (its file whole)")
     finally:
+        rig.cloud.service(
+            "live_stop_push", {"video_id": VIDEO}
+        )  # whatever happened: the next test starts idle
         rtmp.close()
     info = probe(smooth.out)
     assert (info["width"], info["height"]) == ("960", "540")  # DJI's "smooth": 960×540, 512 kbps

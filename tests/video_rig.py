@@ -55,7 +55,15 @@ class Receiver:
         )  # fmt: skip
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
-        wait_until(lambda: listening(port), 10, what=f"the RTMP receiver on {port}")
+        try:
+            wait_until(
+                lambda: listening(port) or self.proc.poll() is not None, 10, what=f"the receiver on {port}"
+            )
+            if self.proc.poll() is not None:
+                raise AssertionError(f"the RTMP receiver on {port} exited ({self.proc.returncode})")
+        except AssertionError:
+            self.close()
+            raise
 
     def _read(self) -> None:
         assert self.proc.stdout is not None
@@ -90,9 +98,14 @@ class Listener:
     def _loop(self) -> None:
         while not self._stop.is_set():
             self.receivers[-1].proc.wait()
-            if self._stop.is_set():
+            while not self._stop.is_set():
+                try:
+                    rx = Receiver(self.port, self.tmp / f"{self.name}-{len(self.receivers)}.flv")
+                except AssertionError:  # the port not free again yet: listen once more
+                    time.sleep(0.1)
+                    continue
+                self.receivers.append(rx)
                 break
-            self.receivers.append(Receiver(self.port, self.tmp / f"{self.name}-{len(self.receivers)}.flv"))
 
     @property
     def url(self) -> str:
@@ -100,9 +113,11 @@ class Listener:
 
     def close(self) -> None:
         self._stop.set()
-        for rx in list(self.receivers):
+        for rx in list(self.receivers):  # wakes the loop from its wait
             rx.close()
         self._thread.join(5)
+        for rx in list(self.receivers):  # one it may have started meanwhile
+            rx.close()
 
 
 def probe(path: Path) -> dict[str, str]:
