@@ -1,7 +1,7 @@
 # dji-gateway: the three commands a user and CI need.
 #   make run    install the runtime dependencies only, start a local mosquitto (if none is given) and the
 #               gateway with simulated devices
-#   make test   set up .venv with the dev extras, install mosquitto and chromium if missing, run ruff, mypy and
+#   make test   set up .venv with the dev extras, install mosquitto, chromium and ffmpeg if missing, run ruff, mypy and
 #               the whole pytest suite in parallel (TEST_WORKERS, default 10; hadolint comes from PyPI with the
 #               dev extras)
 #   make bench  print the benchmark tables (codecs, end-to-end round trips)
@@ -20,7 +20,7 @@ TEST_WORKERS ?= 10
 RUNTIME := $(VENV)/.installed-runtime
 DEV     := $(VENV)/.installed-dev
 
-.PHONY: all run test bench lint venv mosquitto nats chromium clean schema
+.PHONY: all run test bench lint venv mosquitto nats chromium ffmpeg clean schema
 
 all: test
 
@@ -76,18 +76,31 @@ chromium:
 		echo "chromium is missing ('sudo apt-get install chromium'): the browser tests will be skipped" >&2; \
 	fi
 
+# Live video (docs/video.md): Debian's ffmpeg (5.1, libx264, drawtext with libfreetype) and a font for the
+# test pattern; without them the video tests are skipped, saying why, and live_start_push answers 399015.
+ffmpeg:
+	@if command -v ffmpeg >/dev/null 2>&1 && command -v ffprobe >/dev/null 2>&1 \
+		&& [ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ]; then :; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing ffmpeg and fonts-dejavu-core with apt-get"; \
+		$(APT_INSTALL) ffmpeg fonts-dejavu-core >/dev/null \
+			|| echo "ffmpeg could not be installed: the video tests will be skipped" >&2; \
+	else \
+		echo "ffmpeg is missing ('sudo apt-get install ffmpeg fonts-dejavu-core'): the video tests will be skipped" >&2; \
+	fi
+
 lint: venv
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/mypy schemas adapters gateway
 
-test: venv mosquitto nats chromium lint
+test: venv mosquitto nats chromium ffmpeg lint
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder
 
-bench: venv mosquitto nats
+bench: venv mosquitto nats ffmpeg
 	$(PY) bench/run.py
 
-run: $(RUNTIME) mosquitto
+run: $(RUNTIME) mosquitto ffmpeg
 	$(PY) -m gateway.cli.devrun $(ARGS)
 
 schema: $(RUNTIME)

@@ -121,6 +121,7 @@ SUITES: list[tuple[str, Suite]] = [
     ("console", _lazy("bench.console")),
     ("wayline", _lazy("bench.wayline")),
     ("soak", _lazy("bench.soak")),
+    ("video", _lazy("bench.video")),
 ]
 #: suites timed inside this one process, pinned to one CPU. The others run brokers, gateways and
 #: simulators as several processes, which inherit the affinity: pinned, 100 gateway processes and the

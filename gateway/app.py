@@ -31,6 +31,7 @@ from gateway.northbound import Northbound
 from gateway.observability import Observability
 from gateway.settings import GatewaySettings
 from gateway.store import StateStore
+from gateway.video.service import LiveService
 from gateway.wayline.service import WaylineService
 from gateway.web.server import WebServer
 from schemas import TopicKind, default_registry, subscriptions, topic
@@ -85,6 +86,7 @@ class GatewayApp:
         self.wayline: WaylineService | None = None  # flighttask_* / return_home* (gateway/wayline)
         self.cloud_control: CloudControl | None = None  # cloud_control_auth_request / _release
         self.store: StateStore | None = None  # what must outlive the process (gateway/store.py)
+        self.live: LiveService | None = None  # live_* and the ffmpeg pipelines (gateway/video)
         self._background: set[asyncio.Task[None]] = set()  # fire-and-forget work kept referenced
         self.observability: Observability | None = None  # /metrics, /healthz, /status, / (None: off)
         self.web: WebServer | None = None  # the aiohttp server (its own thread) that serves them
@@ -167,6 +169,11 @@ class GatewayApp:
             on_change=lambda: self._cloud_control_changed(loop),
         )
         drc.cloud_control = cloud_control.auth
+        live = self.live = LiveService(
+            settings=s.video, devices=self.devices, clock=self.clock, metrics=self.metrics,
+            publish_state=nb.gateway_state,
+        )  # fmt: skip
+        nb.gateway_state_data = live.state
         # the will and the clean goodbye have one shape: a topology with no sub-devices (all offline); the
         # will is fixed at connect (MQTT), so the clean stop builds a fresh one (_shutdown)
         offline = (topic(TopicKind.STATUS, gw), nb.topology(offline=True))
@@ -187,6 +194,7 @@ class GatewayApp:
             on_requests_reply=requests.answer,
             cloud_control=cloud_control,
             journal=store,  # replies outlive the process: a tid resent after a restart is not acted on again
+            live=live,
         )
         self.drc.call_service = self.dispatcher.call_local  # drc_gimbal_reset runs as gimbal_reset
         for adapter in self.devices:
@@ -194,6 +202,7 @@ class GatewayApp:
         bridge.start()
         periodic = loop.create_task(nb.run(self.stop_event), name="northbound")
         waylines = loop.create_task(wayline.run(self.stop_event), name="wayline")
+        streams = loop.create_task(live.run(self.stop_event), name="live")
         consumer = loop.create_task(self._consume(), name="inbound")
         if s.metrics.enabled:
             self._serve_web(Observability(self, loop, clock=self.clock), loop)
@@ -204,6 +213,7 @@ class GatewayApp:
         finally:
             await self._shutdown(periodic, consumer, offline)
             await waylines  # ends with stop_event
+            await streams
 
     def _cloud_control_changed(self, loop: asyncio.AbstractEventLoop) -> None:
         """The cloud-control grant changed hands or ended: live control re-checks its session; a new
@@ -260,6 +270,8 @@ class GatewayApp:
         await asyncio.gather(*(a.stop_motion() for a in self.devices), return_exceptions=True)
         if self.wayline is not None:
             await self.wayline.stop()
+        if self.live is not None:  # every pipeline ends (its stream closes) before the goodbye
+            await self.live.shutdown()
         if self.cloud_control is not None:
             self.cloud_control.stop()
         for adapter in self.devices:  # what the operator who pressed Ctrl-C needs to know

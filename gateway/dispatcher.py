@@ -118,6 +118,15 @@ class WaylineCalls(Protocol):
     async def call(self, method: str, data: Any) -> tuple[int, dict[str, Any] | None]: ...
 
 
+class LiveCalls(Protocol):
+    """What the dispatcher asks of live streaming (:class:`gateway.video.service.LiveService`): the
+    ``live_*`` services, each as (result code, output)."""
+
+    methods: frozenset[str]
+
+    async def call(self, method: str, data: Any) -> tuple[int, dict[str, Any] | None]: ...
+
+
 class ReplyJournal(Protocol):
     """Where replies outlive the process (:class:`gateway.store.StateStore`): a request resent with the
     same tid after a restart is answered from here, not acted on again."""
@@ -163,6 +172,7 @@ class Dispatcher:
         cloud_control: CloudControlCalls | None = None,
         journal: ReplyJournal | None = None,
         own_gateways: frozenset[str] = frozenset(),
+        live: LiveCalls | None = None,
     ) -> None:
         self.gateway_sn = gateway_sn
         #: devices announced as gateways of their own: their ``services`` topic is served too
@@ -181,6 +191,7 @@ class Dispatcher:
         #: gateway.wayline.service.WaylineService (flighttask_*, return_home*), None: no wayline tasks
         self.wayline = wayline
         self.cloud_control = cloud_control  # gateway.cloud_control.CloudControl, None: not offered
+        self.live = live  # gateway.video.service.LiveService (live_*), None: no live video
         #: told every valid requests_reply (gateway.cloud_requests.CloudRequests.answer)
         self.on_requests_reply = on_requests_reply
         self._replies: OrderedDict[str, _Cached] = OrderedDict()
@@ -437,6 +448,11 @@ class Dispatcher:
             if self.wayline is not None and method in self.wayline.methods:
                 try:
                     return await self.clock.wait_for(self.wayline.call(method, data), MAX_DEADLINE)
+                except TimeoutError:
+                    return ResultCode.DEVICE_TIMEOUT, {"reason": f"{method} did not finish in time"}
+            if self.live is not None and method in self.live.methods:
+                try:
+                    return await self.clock.wait_for(self.live.call(method, data), MAX_DEADLINE)
                 except TimeoutError:
                     return ResultCode.DEVICE_TIMEOUT, {"reason": f"{method} did not finish in time"}
             adapter, problem = self._route(method, data)

@@ -75,6 +75,8 @@ class Northbound:
         self._next_osd: dict[str, float] = {}
         #: the gateway's own osd body (drc_state, the live-control failsafe); set by the app
         self.gateway_osd_data: Callable[[], dict[str, Any]] = lambda: {"drc_state": 0}
+        #: the gateway's state body on every (re)connect (live_capacity, live_status); None: nothing
+        self.gateway_state_data: Callable[[], dict[str, Any]] | None = None
         #: called when a device takes flight authority back (the app hands it to live control)
         self.on_authority_lost: Callable[[str], None] | None = None
         self._next_gateway_osd = 0.0
@@ -180,6 +182,19 @@ class Northbound:
             log.error("dropped an invalid gateway osd: %s", exc.errors()[:2])
             return
         self.outbox.publish(topic(TopicKind.OSD, self.gateway_sn), msg.model_dump_json().encode(), qos=0)
+
+    def gateway_state(self, data: Mapping[str, Any]) -> None:
+        """The gateway's own state (``live_capacity``, ``live_status``), under the gateway's serial number."""
+        if not data:
+            return
+        cls = self.registry.telemetry_class(TopicKind.STATE, Profile.GATEWAY)
+        try:
+            msg = cls.model_validate({**self._ids(), "gateway": self.gateway_sn, "data": dict(data)})
+        except ValidationError as exc:
+            self.metrics.inc("outbound_invalid_total", kind="state")
+            log.error("dropped an invalid gateway state: %s", exc.errors()[:2])
+            return
+        self.outbox.publish(topic(TopicKind.STATE, self.gateway_sn), msg.model_dump_json().encode(), qos=1)
 
     def online_changed(self, sn: str, online: bool) -> None:
         self.metrics.set("device_online", 1 if online else 0, device=sn)
@@ -351,6 +366,8 @@ class Northbound:
         for adapter in self.devices:
             if adapter.online and adapter.info.carried_by is None:
                 self.publish_state(adapter)
+        if self.gateway_state_data is not None:  # live_capacity / live_status (gateway/video)
+            self.gateway_state(self.gateway_state_data())
         self._next_osd.clear()
 
     def publish_due_osd(self) -> None:

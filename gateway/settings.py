@@ -48,6 +48,8 @@ __all__ = [
     "GatewaySettings",
     "MetricsSettings",
     "ProductSettings",
+    "VideoSettings",
+    "VideoSource",
     "load_settings",
 ]
 
@@ -305,6 +307,87 @@ class WaylineSettings(BaseModel):
     strict_actions: bool = Field(False, description="refuse routes with actions the aircraft would skip")
 
 
+#: A video source: a network URL ffmpeg opens, a V4L2 device, or a test pattern (``test:``).
+_SOURCE_SCHEMES = ("rtsp", "rtsps", "rtmp", "rtmps", "srt", "udp", "tcp", "http", "https")
+
+
+def _check_source(value: str) -> str:
+    if value == "test:" or value.startswith("test:"):
+        if value not in ("test:", "test:testsrc2", "test:smptebars"):
+            raise ValueError("a test source is test:, test:testsrc2 or test:smptebars")
+        return value
+    if value.startswith("/dev/video"):
+        return value
+    scheme = urlsplit(value).scheme.lower()
+    if scheme not in _SOURCE_SCHEMES:
+        raise ValueError(f"a source is a {', '.join(_SOURCE_SCHEMES)} URL, /dev/videoN or test:")
+    return value
+
+
+class VideoSource(BaseModel):
+    """One camera picture of a device, as the gateway's computer receives it (docs/video.md)."""
+
+    model_config = _STRICT
+    sn: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$",
+                    description="the device (a [[devices]] sn) whose camera this is")  # fmt: skip
+    camera_index: str = Field(
+        "0-0-0", pattern=r"^[0-9]{1,5}-[0-9]{1,5}-[0-9]{1,5}$",
+        description="{type-subtype-gimbalindex} in video_id (the payload_index of the camera's gimbal)",
+    )  # fmt: skip
+    video_index: str = Field("normal-0", pattern=r"^[A-Za-z0-9_]{1,16}(-[0-9]{1,3})?$",
+                             description="the stream's index in video_id")  # fmt: skip
+    source: str = Field(description="rtsp://, rtmp://, srt://, udp://, tcp://, http(s):// URL, /dev/videoN "
+                        "(V4L2) or test: (a moving pattern)")  # fmt: skip
+    codec: Literal["h264", "other"] = Field(
+        "other", description="the source's codec: h264 is passed through (no re-encode) at quality 0 to RTMP"
+    )
+    lenses: dict[Literal["wide", "zoom", "ir"], str] = Field(
+        default_factory=dict, description="other lenses: video_type -> source (live_lens_change)"
+    )
+
+    @field_validator("source")
+    @classmethod
+    def _source(cls, value: str) -> str:
+        return _check_source(value)
+
+    @field_validator("lenses")
+    @classmethod
+    def _lens_sources(cls, value: dict[str, str]) -> dict[str, str]:
+        for source in value.values():
+            _check_source(source)
+        return value
+
+    @property
+    def video_id(self) -> str:
+        return f"{self.sn}/{self.camera_index}/{self.video_index}"
+
+
+class VideoSettings(BaseModel):
+    """Live video (``live_*``): the sources and the supervised ffmpeg pipelines (docs/video.md)."""
+
+    model_config = _STRICT
+    sources: list[VideoSource] = Field(
+        default_factory=list,
+        max_length=64,
+        description="[[video.sources]]: sn, camera_index, video_index, source, codec, lenses (docs/video.md)",
+    )
+    test_pattern: bool = Field(
+        False, description="every device also has a test-pattern video (run --simulate sets it)"
+    )
+    ffmpeg: str = Field("ffmpeg", description="the ffmpeg executable (apt-get install ffmpeg)")
+    max_streams: int = Field(2, ge=1, le=16, description="streams at once (coexist_video_number_max)")
+    start_wait: float = Field(
+        2.0, gt=0, le=2.5, description="how long live_start_push waits for the first frames before answering"
+    )
+    stall_timeout: float = Field(5.0, gt=0, description="restart a pipeline without a frame this long")
+    backoff_initial: float = Field(0.5, gt=0, description="first restart delay after a failure (doubles)")
+    backoff_max: float = Field(10.0, gt=0, description="longest restart delay")
+    threads: int = Field(2, ge=1, le=16, description="encoder threads per pipeline (CPU bound)")
+    memory_mb: int = Field(1024, ge=128, description="address-space limit per pipeline (prlimit --as)")
+    nice: int = Field(10, ge=0, le=19, description="pipelines run at this nice level")
+    preview: bool = Field(True, description="pipelines also feed the web console's preview (fragmented MP4)")
+
+
 class MetricsSettings(BaseModel):
     """The HTTP endpoint for Prometheus (``/metrics``), health checks (``/healthz``) and ``dji-gateway
     status`` (``/status``)."""
@@ -416,6 +499,7 @@ class GatewaySettings(BaseSettings):
     metrics: MetricsSettings = MetricsSettings()
     console: ConsoleSettings = ConsoleSettings()
     devices: list[DeviceSettings] = Field(default_factory=list, max_length=MAX_SUB_DEVICES)
+    video: VideoSettings = VideoSettings()
     osd_period: float = Field(2.0, gt=0, description="periodic osd (0.5 Hz by default, per device override)")
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
     log_json: bool = False
@@ -430,6 +514,13 @@ class GatewaySettings(BaseSettings):
         sns = [d.sn for d in self.devices]
         if len(set(sns)) != len(sns):
             raise ValueError("device serial numbers must be unique")
+        known = set(sns)
+        for source in self.video.sources:
+            if source.sn not in known:
+                raise ValueError(f"video source {source.video_id}: no device with sn {source.sn}")
+        vids = [source.video_id for source in self.video.sources]
+        if len(set(vids)) != len(vids):
+            raise ValueError("video sources must have unique video ids")
         idx = [i for i in (getattr(d, "payload_index", None) for d in self.devices) if i is not None]
         if len(set(idx)) != len(idx):
             raise ValueError("payload_index values must be unique")

@@ -63,6 +63,7 @@ from .envelope import (
     telemetry_class,
 )
 from .events import DrcStatusNotify, FlyToPointProgress, JoystickInvalidNotify, TakeoffToPointProgress
+from .live import LiveLensChange, LiveSetQuality, LiveStartPush, LiveStopPush
 from .osd import AircraftOsd, GatewayOsd, GimbalOsd, RobotOsd
 from .services import (
     CameraAim,
@@ -82,7 +83,7 @@ from .services import (
     PayloadAuthorityGrab,
     TakeoffToPoint,
 )
-from .state import AircraftState, AuthorityState, RobotState
+from .state import AircraftState, AuthorityState, GatewayState, RobotState
 from .status import UpdateTopo
 from .topics import TOPICS, Direction, TopicKind, reply_kind
 from .wayline import (
@@ -273,12 +274,21 @@ CLOUD_CONTROL_METHODS: tuple[MethodSpec, ...] = (
     ),
 )
 
+#: Live streaming (DJI's live page, Cloud-API-Doc ``.../20.dock/10.dock2/30.live.md``; schemas/live.py).
+LIVE_METHODS: tuple[MethodSpec, ...] = (
+    _dji(_S, "live_start_push", LiveStartPush, ResultReply, "Start live streaming"),
+    _dji(_S, "live_stop_push", LiveStopPush, ResultReply, "Stop live streaming"),
+    _dji(_S, "live_set_quality", LiveSetQuality, ResultReply, "Set live streaming quality"),
+    _dji(_S, "live_lens_change", LiveLensChange, ResultReply, "Set live streaming lens"),
+)
+
 #: The osd/state body each device profile publishes.
 TELEMETRY: dict[tuple[TopicKind, Profile], type[ContractModel]] = {
     (TopicKind.OSD, Profile.GATEWAY): GatewayOsd,
     (TopicKind.OSD, Profile.AIRCRAFT): AircraftOsd,
     (TopicKind.OSD, Profile.GIMBAL): GimbalOsd,
     (TopicKind.OSD, Profile.ROBOT): RobotOsd,
+    (TopicKind.STATE, Profile.GATEWAY): GatewayState,
     (TopicKind.STATE, Profile.AIRCRAFT): AircraftState,
     (TopicKind.STATE, Profile.GIMBAL): AuthorityState,
     (TopicKind.STATE, Profile.ROBOT): RobotState,
@@ -481,5 +491,5 @@ class Registry:
 
 def default_registry() -> Registry:
     """A new registry holding every method of seed 003 (and update_topo), the wayline methods and
-    cloud-control authorisation."""
-    return Registry((*SEED_METHODS, *WAYLINE_METHODS, *CLOUD_CONTROL_METHODS))
+    cloud-control authorisation and live streaming."""
+    return Registry((*SEED_METHODS, *WAYLINE_METHODS, *CLOUD_CONTROL_METHODS, *LIVE_METHODS))

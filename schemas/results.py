@@ -16,6 +16,11 @@ Codes this project reserves (DJI's catalogue does not use the 399xxx block or 59
 - 399004 ``OUTCOME_UNKNOWN``: a request resent with a tid that an earlier gateway process started acting on
   and stopped (killed) before keeping its reply: not acted on again, since whether the device acted is
   unknown; the cloud reads the device's state (docs/brokers.md, "Exactly once across restarts").
+- 399010..399016: live streaming (``live_*``, docs/video.md): 399010 ``LIVE_URL_TYPE_UNSUPPORTED`` (Agora,
+  RTSP, GB28181, WHIP: no maintained engine here), 399011 ``LIVE_ALREADY_STREAMING`` (this video already
+  streams to another target), 399012 ``LIVE_UNKNOWN_VIDEO`` (no configured source for this video id),
+  399013 ``LIVE_LENS_UNAVAILABLE``, 399014 ``LIVE_NOT_STREAMING``, 399015 ``LIVE_START_FAILED`` (the media
+  engine could not start or lost the source; also ``live_status.error_status``), 399016 ``LIVE_TOO_MANY``.
 - 599001 ``INTERNAL_ERROR``: the gateway failed (a bug or an unexpected exception); never a device error.
 - 336000 + ack: the Onboard SDK ground-station ACK family (seed 004), reported as ``ground_station_ack(ack)``
   so the raw ACK survives the trip to the cloud (ack 0 is success and maps to 0).
@@ -86,6 +91,13 @@ class ResultCode(enum.IntEnum):
         "dji-gateway: an earlier gateway process started this request and stopped before answering; "
         "whether the device acted is unknown, and it was not repeated.",
     )
+    LIVE_URL_TYPE_UNSUPPORTED = 399010, "dji-gateway: this live url_type is not supported here."
+    LIVE_ALREADY_STREAMING = 399011, "dji-gateway: this video already streams to another target."
+    LIVE_UNKNOWN_VIDEO = 399012, "dji-gateway: no video source is configured for this video_id."
+    LIVE_LENS_UNAVAILABLE = 399013, "dji-gateway: this video cannot switch to that lens."
+    LIVE_NOT_STREAMING = 399014, "dji-gateway: this video is not streaming."
+    LIVE_START_FAILED = 399015, "dji-gateway: the stream failed (source/target unreachable, no engine)."
+    LIVE_TOO_MANY = 399016, "dji-gateway: too many streams at once."
     INTERNAL_ERROR = 599001, "dji-gateway: internal error."
 
 

@@ -14,6 +14,7 @@ import enum
 from pydantic import Field, model_validator
 
 from .base import Bool, Int, IntEnumField, OutboundModel, PayloadIndex, SerialNumber, Text, enum_description
+from .live import LiveCapacity, LiveStatusEntry
 
 
 class DrcState(enum.IntEnum):
@@ -85,6 +86,22 @@ class AircraftState(AuthorityState):
         default=None,
         description="Extension. Flight controller hardware (from its version name): A3, N3, M100, ...",
     )
+
+
+class GatewayState(OutboundModel):
+    """The gateway's own state (``thing/product/{gateway_sn}/state``): its live-streaming capability and the
+    state of every stream, as a dock reports them (DJI dock properties page: ``live_capacity``,
+    ``live_status``, pushMode 1)."""
+
+    live_capacity: LiveCapacity | None = Field(default=None, description="Which videos can stream.")
+    live_status: list[LiveStatusEntry] | None = Field(
+        default=None, max_length=64, description="Every stream: status 1 live, 0 not; error_status."
+    )
+
+    @model_validator(mode="after")
+    def _not_empty(self) -> GatewayState:
+        require_any(self)
+        return self
 
 
 class DrcStateProperty(OutboundModel):

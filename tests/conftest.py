@@ -79,6 +79,7 @@ SHARED_FIXTURE_MODULES = frozenset(
         "test_drc_interop.py",
         "test_fly.py",
         "test_schemas_export.py",
+        "test_video.py",
     }
 )
 #: Long tests not marked ``slow`` (none now: mark a long test ``slow`` instead). An ordering hint only.

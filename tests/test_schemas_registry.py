@@ -75,7 +75,15 @@ SEED_METHOD_NAMES = {
 #: Newer DRC methods from DJI's Cloud API docs (Dock 2/3, RC Plus 2), beyond seed 003 (docs/cloud-api.md).
 DJI_DOC_METHOD_NAMES: dict[TopicKind, set[str]] = {
     # cloud-control authorisation (RC Plus 2 / RC Pro "DRC" page: docs/cloud-api.md)
-    TopicKind.SERVICES: {"cloud_control_auth_request", "cloud_control_release"},
+    # and live streaming (DJI's live page: docs/video.md)
+    TopicKind.SERVICES: {
+        "cloud_control_auth_request",
+        "cloud_control_release",
+        "live_start_push",
+        "live_stop_push",
+        "live_set_quality",
+        "live_lens_change",
+    },
     TopicKind.EVENTS: {"cloud_control_auth_notify"},
     TopicKind.DRC_DOWN: {"stick_control", "drc_gimbal_reset"},
     TopicKind.DRC_UP: {

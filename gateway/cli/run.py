@@ -60,8 +60,14 @@ def simulated_settings(base: dict[str, Any]) -> dict[str, Any]:
     doc = dict(base)
     doc.setdefault("gateway_sn", SIM_GATEWAY_SN)
     devices = list(doc.get("devices", []))
-    devices += [dict(family.tour) for family in families.all_families() if family.tour is not None]
+    tour = [dict(family.tour) for family in families.all_families() if family.tour is not None]
+    devices += tour
     doc["devices"] = devices
+    # every simulated device streams a test pattern (its sn, the time, osd values drawn in: docs/video.md)
+    video = dict(doc.get("video", {}))
+    video.setdefault("test_pattern", True)
+    video.setdefault("max_streams", len(tour))
+    doc["video"] = video
     return doc
 
 

@@ -51,6 +51,7 @@ from gateway.web.frames import LinkInspector
 from gateway.web.journal import redact
 from gateway.web.security import COOKIE, Denied, Guard, Who
 from gateway.web.state import ConsoleState
+from gateway.web.video import VideoRoutes
 
 log = logging.getLogger(__name__)
 
@@ -219,6 +220,13 @@ class WebServer:
             r.add_post("/api/cloud-control", self._cloud_control_post)
             r.add_get("/api/frames/{sn}", self._frames_download)
             r.add_get("/api/ws", self._ws)
+            VideoRoutes(  # the live video preview (gateway/web/video.py, static/js/video.js)
+                live=lambda: getattr(self.app, "live", None),
+                viewer=self._viewer,
+                refuse=self._refuse,
+                same_origin=lambda req: "Origin" not in req.headers or _same_host(req.headers["Origin"], req),
+                on_gateway=self._on_gateway,
+            ).add_to(r)
         r.add_route("*", "/{tail:.*}", self._not_found)
         runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
         await runner.setup()
@@ -292,7 +300,7 @@ class WebServer:
             parts = urlsplit(self.console.tile_url)
             img += f" {parts.scheme}://{parts.netloc}"
         return (
-            "default-src 'none'; script-src 'self'; style-src 'self'; connect-src 'self'; "
+            "default-src 'none'; script-src 'self'; style-src 'self'; connect-src 'self'; media-src blob:; "
             f"img-src {img}; font-src 'self'; base-uri 'none'; form-action 'self'; frame-ancestors 'none'"
         )
 
