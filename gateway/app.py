@@ -32,7 +32,7 @@ from gateway.observability import Observability
 from gateway.settings import GatewaySettings
 from gateway.store import StateStore
 from gateway.wayline.service import WaylineService
-from gateway.web.server import WebServer
+from gateway.web.server import WebServer, bind_problem
 from schemas import TopicKind, default_registry, subscriptions, topic
 from schemas.registry import Registry
 
@@ -88,6 +88,8 @@ class GatewayApp:
         self._background: set[asyncio.Task[None]] = set()  # fire-and-forget work kept referenced
         self.observability: Observability | None = None  # /metrics, /healthz, /status, / (None: off)
         self.web: WebServer | None = None  # the aiohttp server (its own thread) that serves them
+        #: what ``dji-gateway run`` exits with: 2 when the HTTP endpoint could not be bound
+        self.exit_code = 0
         #: told (topic, payload) of every message the northbound and the dispatcher publish, and of every
         #: message the dispatcher is handed (not drc/down, answered inline): the web console's log
         self.published: list[Callable[[str, bytes], None]] = []
@@ -218,13 +220,20 @@ class GatewayApp:
 
     def _serve_web(self, observability: Observability, loop: asyncio.AbstractEventLoop) -> None:
         """Serve the views (``/metrics``, ``/healthz``, ``/status``, the console unless disabled) on the
-        metrics port; on the gateway's loop. A port that cannot be bound leaves both None (logged, never
-        fatal: the bridge matters more than its metrics)."""
+        metrics port; on the gateway's loop. A port that cannot be bound stops the gateway (exit code 2,
+        the port and the setting named): an address printed for it would be answered by whatever holds
+        it, another gateway's console or status (issue #35). ``dji-gateway run`` tries the port before
+        anything starts; this is the race after that check."""
         s = self.settings
-        web = WebServer(observability, s.console, loop).start(s.metrics.host, s.metrics.port)
+        server = WebServer(observability, s.console, loop)
+        web = server.start(s.metrics.host, s.metrics.port)
         if web is not None:
             observability.port = web.port
             self.observability, self.web = observability, web
+            return
+        log.error("%s", bind_problem(s.metrics.host, s.metrics.port, server.bind_error or "no answer"))
+        self.exit_code = 2
+        self.stop_event.set()
 
     def stop(self) -> None:
         self.stop_event.set()

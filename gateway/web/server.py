@@ -49,12 +49,12 @@ from gateway.settings import ConsoleSettings
 from gateway.web import actions
 from gateway.web.frames import LinkInspector
 from gateway.web.journal import redact
-from gateway.web.security import COOKIE, Denied, Guard, Who
+from gateway.web.security import COOKIE, CSRF_HEADER, Denied, Guard, Who
 from gateway.web.state import ConsoleState
 
 log = logging.getLogger(__name__)
 
-__all__ = ["STATIC", "WebServer"]
+__all__ = ["STATIC", "WebServer", "bind_problem"]
 
 STATIC = Path(str(resources.files("gateway.web") / "static"))
 #: a page's queue of journal and frame messages; older ones are dropped first when it reads too slowly
@@ -68,12 +68,27 @@ DECODE_SLICE = 8
 DECODE_PER_TICK = 120
 DECODE_PAUSE = 0.001
 _JSON = "application/json"
+#: what a page may send on live control (``{"type": "drc", …}`` on its WebSocket): sticks, heartbeats, stop
+PAGE_DRC = ("drone_control", "heart_beat", "drone_emergency_stop")
 _HEADERS = {
     "X-Content-Type-Options": "nosniff",
     "X-Frame-Options": "DENY",
     "Referrer-Policy": "same-origin",
     "Cache-Control": "no-store",
 }
+
+
+#: where the HTTP endpoint's port is set, named in the message when it cannot be bound
+PORT_SETTING = "--metrics-port, DJIGW_METRICS__PORT or [metrics] port (0: any free port)"
+
+
+def bind_problem(host: str, port: int, reason: str) -> str:
+    """The one message for an HTTP port that cannot be bound: the address, why, and the setting."""
+    return (
+        f"cannot listen on {host}:{port} for the web console, /metrics, /healthz and /status ({reason}): "
+        f"is another gateway running? Choose another port with {PORT_SETTING}, or turn the endpoint off "
+        "(--no-metrics, metrics.enabled = false)"
+    )
 
 
 def _dumps(value: Any) -> str:
@@ -97,6 +112,12 @@ class _Page:
         self.queue: deque[str] = deque(maxlen=CLIENT_QUEUE)
         self.wake = asyncio.Event()
         self.frames_sn: str | None = None
+        #: live control from this page: it has sent sticks (its WebSocket's loss zeroes them); the seq of
+        #: its next drone_control and heart_beat (the gateway counts, so a reconnected page starts at 0)
+        self.piloting = False
+        self.refused = False
+        self.seq = 0
+        self.beats = 0
 
     def offer(self, message: str, *, state: bool = False) -> None:
         if state:
@@ -119,8 +140,8 @@ class _Page:
 
 
 class WebServer:
-    """The endpoint of one running gateway: ``start(host, port)`` binds it (or logs why not and returns
-    None: the bridge matters more than its metrics), ``stop()`` closes it and every page."""
+    """The endpoint of one running gateway: ``start(host, port)`` binds it (or returns None with the
+    reason in ``bind_error``: the app stops, naming the port), ``stop()`` closes it and every page."""
 
     def __init__(self, observability: Observability, console: ConsoleSettings, gateway_loop: Any) -> None:
         self.obs = observability
@@ -132,6 +153,8 @@ class WebServer:
         )
         self.guard: Guard | None = None
         self.port: int | None = None
+        #: why ``start`` could not listen (the caller names the port and the setting)
+        self.bind_error: str | None = None
         self.loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._runner: web.AppRunner | None = None
@@ -154,8 +177,7 @@ class WebServer:
         ready.wait(15)
         if failure or self.port is None:
             exc = failure[0] if failure else TimeoutError("no answer")
-            reason = getattr(exc, "strerror", None) or str(exc)
-            log.warning("metrics endpoint disabled: cannot listen on %s:%d (%s)", host, port, reason)
+            self.bind_error = getattr(exc, "strerror", None) or str(exc)
             self.stop()
             return None
         log.info("metrics on http://%s:%d/metrics (also /healthz, /status)", host, self.port)
@@ -609,6 +631,9 @@ class WebServer:
                     ask = json.loads(msg.data)
                 except ValueError:
                     continue
+                if isinstance(ask, dict) and ask.get("type") == "drc":
+                    self._pilot(request, page, ask)
+                    continue
                 if isinstance(ask, dict) and ask.get("type") == "frames":
                     sn = ask.get("sn")
                     page.frames_sn = sn if isinstance(sn, str) and sn in self.state.inspectors else None
@@ -627,11 +652,63 @@ class WebServer:
                             )
                         )
         finally:
+            if page.piloting:  # the dead-man of a lost WebSocket: the page's sticks zeroed at once
+                self._down(page, "drone_control", {"x": 0.0, "y": 0.0, "h": 0.0, "w": 0.0})
             self._pages.discard(page)
             sender.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await sender
         return ws
+
+    # -- live control from the page (the web thread) -----------------------------------------------------
+    def _pilot(self, request: web.Request, page: _Page, ask: dict[str, Any]) -> None:
+        """``{"type": "drc", "csrf", "method", "data"}``: the page's ``drone_control``, ``heart_beat`` or
+        ``drone_emergency_stop``, fed to the live-control session as a ``drc/down`` message on the main
+        link (``DrcController.inline_main``, the path a cloud's takes: its seq rules, stick and heartbeat
+        timeouts, authority and cloud-control checks; answers go out on ``drc/up``). An action: the sign-in
+        session's CSRF token, as for the forms (an emergency stop also from a read-only console). Refused
+        messages are answered to the page (``drc_refused``), audited, never fed."""
+        method = ask.get("method")
+        headers = {**request.headers, CSRF_HEADER: str(ask.get("csrf") or "")}
+        denied = self._guard().may_act(
+            headers, request.cookies, request.remote or "?", stop=method == "drone_emergency_stop"
+        )
+        if denied is None and (method not in PAGE_DRC or set(ask) - {"type", "csrf", "method", "data"}):
+            denied = Denied(400, f"expected {{type: drc, csrf, method: {'|'.join(PAGE_DRC)}, data}}")
+        data = ask.get("data", {})
+        if denied is None and not isinstance(data, dict):
+            denied = Denied(400, "data: an object")
+        if denied is not None:
+            if not page.refused:  # once per page: a stream of refused sticks is one line
+                audit("console_drc", who=str(page.who), method=str(method)[:32], result="refused",
+                      status=denied.status, reason=denied.reason)  # fmt: skip
+            page.refused = True
+            page.offer(_dumps({"type": "drc_refused", "method": str(method)[:32], "reason": denied.reason}))
+            return
+        if method == "drone_emergency_stop":
+            audit("console_drc", who=str(page.who), method=method, result="sent")
+            self.state.journal.note("emergency_stop", method, who=str(page.who), source="page DRC")
+        elif not page.piloting:
+            audit("console_drc", who=str(page.who), method=method, result="piloting")
+            self.state.journal.note("action", "drc from the page", who=str(page.who))
+        page.piloting = method != "drone_emergency_stop" or page.piloting
+        page.refused = False
+        self._down(page, str(method), data)
+
+    def _down(self, page: _Page, method: str, data: dict[str, Any]) -> None:
+        drc = getattr(self.app, "drc", None)
+        if drc is None:
+            return
+        if method == "drone_control":  # the seq is the page's link's: one page, one increasing count
+            data = {**data, "seq": page.seq}
+            page.seq += 1
+        elif method == "heart_beat":
+            data = {**data, "seq": page.beats}
+            page.beats += 1
+        elif method == "drone_emergency_stop":
+            page.seq = 0  # the stop holds until sticks start again at seq 0 (docs/drc.md)
+        payload = json.dumps({"method": method, "data": data}, separators=(",", ":")).encode()
+        drc.inline_main(drc.down_topic, payload)
 
     async def _pump(self) -> None:
         """Once per tick while pages are open: gather on the gateway's loop, offer to every page."""

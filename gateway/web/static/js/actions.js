@@ -57,7 +57,7 @@ function showForm() {
   reader = build($("#action-form"), method.schema, entry.prefill);
 }
 
-function ask(text) {
+export function ask(text) {
   const dialog = $("#confirm");
   $("#confirm-text").textContent = text;
   return new Promise((resolve) => {
