@@ -68,6 +68,12 @@ DECODE_SLICE = 8
 DECODE_PER_TICK = 120
 DECODE_PAUSE = 0.001
 _JSON = "application/json"
+#: what ``/`` answers and the start logs when the console is off (never a bare 404: issue #35)
+CONSOLE_OFF = (
+    "the web console is off in this gateway (console.enabled = false): turn it on with "
+    "DJIGW_CONSOLE__ENABLED=true and a token (DJIGW_CONSOLE__TOKEN, or DJIGW_CONSOLE__TOKEN_FILE naming a "
+    "secret file); see docs/console.md"
+)
 #: what a page may send on live control (``{"type": "drc", …}`` on its WebSocket): sticks, heartbeats, stop
 PAGE_DRC = ("drone_control", "heart_beat", "drone_emergency_stop")
 _HEADERS = {
@@ -178,9 +184,13 @@ class WebServer:
         if failure or self.port is None:
             exc = failure[0] if failure else TimeoutError("no answer")
             self.bind_error = getattr(exc, "strerror", None) or str(exc)
+            if failure and self._thread is not None:
+                self._thread.join(5)  # it closes its loop: nothing is left to shut down
             self.stop()
             return None
         log.info("metrics on http://%s:%d/metrics (also /healthz, /status)", host, self.port)
+        if not self.console.enabled:
+            log.info("%s", CONSOLE_OFF)
         if self.console.enabled:
             log.info(
                 "web console on http://%s:%d/ (%s)",
@@ -337,12 +347,14 @@ class WebServer:
         return web.json_response(await asyncio.get_running_loop().run_in_executor(None, self.obs.status))
 
     async def _not_found(self, request: web.Request) -> web.Response:
-        where = (
-            "/ (the console), /metrics, /healthz or /status"
-            if self.console.enabled
-            else ("/metrics, /healthz or /status")
+        if self.console.enabled:
+            return web.Response(status=404, text="try / (the console), /metrics, /healthz or /status\n")
+        off = (
+            f"{CONSOLE_OFF}\n"
+            if request.path == "/" or request.path.startswith(("/api/", "/static/"))
+            else ""
         )
-        return web.Response(status=404, text=f"try {where}\n")
+        return web.Response(status=404, text=f"{off}try /metrics, /healthz or /status\n")
 
     # -- the console ------------------------------------------------------------------------------------
     def _guard(self) -> Guard:
