@@ -164,7 +164,9 @@ def test_the_compose_gateway_serves_the_console_with_a_token() -> None:
         assert resolved["DJIGW_CONSOLE__ENABLED"] == "true" and resolved["DJIGW_CONSOLE__TOKEN"] == "t" * 20
     config = REPO / gw["volumes"][0].split(":")[0]
     token = env["DJIGW_CONSOLE__TOKEN"].split(":-", 1)[1].rstrip("}")
-    settings = load_settings(config, console={"enabled": True, "token": token})
+    settings = load_settings(
+        config, console={"enabled": env["DJIGW_CONSOLE__ENABLED"] == "true", "token": token}
+    )
     assert settings.metrics.host == "0.0.0.0" and settings.console.enabled
     assert "9108:9108" in gw["ports"][0] and settings.metrics.port == 9108
     assert "DJIGW_CONSOLE_TOKEN" in (REPO / "docs" / "console.md").read_text()  # documented
