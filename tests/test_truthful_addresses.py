@@ -5,26 +5,32 @@
 * ``make run`` (``gateway.cli.devrun``) with its default console port taken serves on a free one and
   prints that one, and every address it prints (the console, ``status --url``, ``monitor --status-url``,
   the broker in the live-control line) is the one this run answers on;
-* the gateway's own bind (the race after the check) stops it the same way.
+* the gateway's own bind (the race after the check) stops it the same way;
+* two gateways with one serial number on one broker are reported (``/status``, ``status``, the console's
+  state), not silently merged.
 """
 
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import re
 import signal
 import socket
 import subprocess
 import sys
+import time
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
+import aiohttp
 import pytest
 
 from gateway.local_broker import LocalBroker
-from tests.support import Proc, gateway_settings
+from tests.support import GatewayThread, Proc, gateway_settings, wait_until
 
 pytestmark = [pytest.mark.timeout(90)]
 
@@ -105,3 +111,68 @@ def test_make_run_with_its_console_port_taken_prints_the_one_it_serves(held: int
         assert proc.stop(timeout=20) == 0, proc.output()[-2000:]
         broker.stop()
     assert not any(tmp_path.glob(".console-token*"))  # removed when the run ended
+
+
+def test_the_twin_watch_tells_its_own_osd_from_another_publishers() -> None:
+    from gateway.twins import TwinWatch
+
+    watch = TwinWatch(keep=2, recent=5.0)
+    for tid in ("a", "b", "c"):
+        watch.sent(f'{{"tid": "{tid}", "data": {{}}}}'.encode())
+    assert not watch.heard(b'{"tid": "c"}', 1.0) and not watch.heard(b'{"tid": "b"}', 1.0)  # echoes
+    assert not watch.heard(b"not json", 1.0) and watch.count == 0
+    assert watch.heard(b'{"tid": "a"}', 2.0)  # forgotten (keep 2) or another's: counted
+    assert watch.heard(b'{"tid": "zz"}', 3.0) and watch.count == 2
+    assert watch.snapshot(4.0) == {"active": True, "count": 2, "last_age_s": 1.0}
+    assert watch.snapshot(9.0)["active"] is False
+
+
+@pytest.mark.broker
+def test_two_gateways_with_one_serial_number_are_reported_not_merged(tmp_path: Path) -> None:
+    """Issue #35: a second gateway configured with the same gateway_sn on the same broker is seen by the
+    first (its osd under that serial number were not sent by it): ``/status``, ``dji-gateway status`` and
+    the console's state say so; alone, a gateway never takes its own osd for another's."""
+    from gateway.cli.status import fetch
+
+    broker = LocalBroker(0).start()
+    first = GatewayThread(gateway_settings(broker.port, [], gateway_sn="GW-TWIN", osd_period=0.2,
+                                           metrics={"enabled": True, "port": 0})).start()  # fmt: skip
+    second: GatewayThread | None = None
+    try:
+        assert first.app.observability is not None
+        url = f"http://127.0.0.1:{first.app.observability.port}"
+        wait_until(lambda: fetch(url, "/status")[1]["broker"]["connected"], 10, what="connected")
+        time.sleep(1.0)  # five of its own osd periods: echoes only
+        assert first.app.twins.count == 0
+        assert fetch(url, "/status")[1]["broker"]["gateway_sn_conflict"]["count"] == 0
+        second = GatewayThread(
+            gateway_settings(broker.port, [], gateway_sn="GW-TWIN", osd_period=0.2)
+        ).start()
+        wait_until(lambda: first.app.twins.count >= 2, 10, what="the twin seen")
+        status = fetch(url, "/status")[1]
+        assert status["broker"]["gateway_sn_conflict"]["active"] is True, status["broker"]
+        assert second.app.twins.count >= 1  # and the second sees the first
+        done = subprocess.run([BIN, "status", "--url", url], capture_output=True, text=True, timeout=30,
+                              env=_env(COLUMNS="200"))  # fmt: skip
+        assert "ANOTHER GATEWAY publishes as GW-TWIN on this broker" in done.stdout, done.stdout
+        with urllib.request.urlopen(url + "/metrics", timeout=5) as resp:
+            assert "djigw_gateway_sn_conflicts" in resp.read().decode()
+        assert json.dumps(first.app.observability.status()["broker"]["gateway_sn_conflict"])
+
+        async def console_state() -> dict[str, Any]:  # what the page is pushed (it draws a red pill from it)
+            async with (
+                aiohttp.ClientSession() as session,
+                session.ws_connect(url + "/api/ws", headers={"Origin": url}) as ws,
+            ):
+                while True:
+                    msg = json.loads((await ws.receive(timeout=5)).data)
+                    if msg["type"] == "state":
+                        return dict(msg)
+
+        conflict = asyncio.run(console_state())["gateway"]["sn_conflict"]
+        assert conflict["active"] is True and conflict["count"] >= 2, conflict
+    finally:
+        if second is not None:
+            second.stop()
+        first.stop()
+        broker.stop()

@@ -76,10 +76,17 @@ export function render(state) {
       drawn.delete(sn);
     }
   }
-  const key = JSON.stringify([state.gateway.brokers, Math.round(state.gateway.uptime_s), state.gateway.requests_in_flight]);
+  const twin = state.gateway.sn_conflict || null;
+  const key = JSON.stringify([state.gateway.brokers, Math.round(state.gateway.uptime_s), state.gateway.requests_in_flight, twin]);
   if (key === brokersDrawn) return;
   brokersDrawn = key;
   const brokers = clear($("#brokers"));
+  if (twin && twin.count) {
+    // two gateways with one serial number on one broker: never shown as one (gateway/twins.py)
+    brokers.append(h("span", { class: "pill off", id: "sn-conflict", "data-active": String(twin.active),
+      title: "an osd under this gateway's serial number that it did not send: another gateway uses the same gateway_sn" },
+      `ANOTHER GATEWAY publishes as ${state.gateway.sn} on this broker (${twin.active ? "now" : `last ${fmt(twin.last_age_s)} s ago`}, ${twin.count} osd): give each its own gateway_sn`));
+  }
   for (const b of state.gateway.brokers) {
     brokers.append(
       h("span", { class: b.connected ? "pill on" : "pill off", "data-broker": b.name },
