@@ -181,6 +181,10 @@ def _nest(fields: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+#: (method, the confirmation's text) of every confirmation _send_from_page answered
+CONFIRMED: list[tuple[str, str]] = []
+
+
 def _send_from_page(page: Any, device: str, method: str, fields: dict[str, Any]) -> str:
     """Choose the device and method, type the fields into the generated form, send (confirming when the
     page asks), and return the result the page shows."""
@@ -196,6 +200,7 @@ def _send_from_page(page: Any, device: str, method: str, fields: dict[str, Any])
     page.click("#action-send")
     moves = page.locator("#confirm").evaluate("d => d.open")
     if moves:
+        CONFIRMED.append((method, page.inner_text("#confirm-text")))
         page.click("#confirm-ok")
     page.wait_for_selector(f'#action-result[data-method="{method}"][data-result]', timeout=15000)
     return str(page.get_attribute("#action-result", "data-result"))
@@ -290,6 +295,12 @@ def test_the_readme_walkthrough_in_the_page(chromium: Any, gateway: dict[str, An
                 assert "AA " in page.inner_text("#frame-detail")  # the hex, from the R SDK SOF on
                 _shoot(page.locator("#frames"), shots / "frame-inspector.png")
                 page.fill("#frame-filter", "")
+        # the confirmations said what moves, where and how far (issue #35)
+        said = dict(CONFIRMED)
+        assert "RSDK-SIM-0001" in said["camera_aim"] and "(0.9, 0.5)" in said["camera_aim"], said
+        takeoff = said["takeoff_to_point"]
+        assert "OSDK-SIM-0001 takes off" in takeoff and "at 80 m" in takeoff, takeoff
+        assert re.search(r", 5[0-9] m north of where it is now", takeoff), takeoff  # the README's 55 m north
         # the aircraft takes off and flies north on the map
         wait_until(
             lambda: _number(page, "#map-svg", "data-aircraft-north") > 10.0,

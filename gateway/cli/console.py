@@ -364,8 +364,15 @@ class GatewaysSeen:
         if isinstance(body, dict) and isinstance(body.get("gateway"), str):
             self.serials.add(body["gateway"])
 
-    def advice(self, wanted: str) -> str:
-        """One sentence: which gateways are there, or that none is."""
+    def advice(self, wanted: str, drc: str | None = None) -> str:
+        """One sentence: which gateways are there, or that none is. ``drc``: the broker a ``--drc`` message
+        went to (a gateway that is here and does not answer it has no live-control session on it)."""
+        if wanted in self.serials and drc is not None:
+            return (
+                f"gateway {wanted} is on this broker but its live control does not ride it: enter it with "
+                f"drc_mode_enter mqtt_broker.address naming this broker ({drc}), or send to the broker that "
+                "drc_mode_enter named"
+            )
         if wanted in self.serials:
             return f"gateway {wanted} is on this broker but did not answer (is the method slow? --timeout)"
         if not self.serials:
@@ -449,12 +456,16 @@ def _send(ns: argparse.Namespace) -> int:
         link.publish(request_topic, body, qos=0 if ns.drc else 1)
         wait = min(ns.timeout, SILENT_WAIT)
         if silent and not arrived.wait(wait):
-            print(f"sent {ns.method}: not refused within {wait:g}s (an accepted one is not answered)")
+            print(
+                f"sent {ns.method}: not refused within {wait:g}s (an accepted one is not answered; it moves "
+                "nothing unless live control rides this broker: the monitor's DRC panel or "
+                "`dji-gateway status` shows drc_state 2)"
+            )
             return EXIT_OK
         if not arrived.wait(ns.timeout):
             print(
                 f"dji-gateway send: no reply to {ns.method} from {gw} within {ns.timeout:g}s; "
-                + seen.advice(gw),
+                + seen.advice(gw, drc=f"{link.settings.host}:{link.settings.port}" if ns.drc else None),
                 file=sys.stderr,
             )
             return EXIT_TIMEOUT

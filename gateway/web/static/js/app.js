@@ -82,6 +82,7 @@ function draw() {
   ctx.drawing = false;
   const msg = ctx.state;
   devices.render(msg);
+  actions.setState(msg);
   map.render(msg);
   instruments.render(msg);
   drc.render(msg.drc);
