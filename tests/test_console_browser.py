@@ -297,7 +297,7 @@ def test_the_readme_walkthrough_in_the_page(chromium: Any, gateway: dict[str, An
                 page.fill("#frame-filter", "")
         # the confirmations said what moves, where and how far (issue #35)
         said = dict(CONFIRMED)
-        assert "RSDK-SIM-0001" in said["camera_aim"] and "(0.9, 0.5)" in said["camera_aim"], said
+        assert "RSDK-SIM-0001" in said["camera_aim"] and "(0.90, 0.50)" in said["camera_aim"], said
         takeoff = said["takeoff_to_point"]
         assert "OSDK-SIM-0001 takes off" in takeoff and "at 80 m" in takeoff, takeoff
         assert re.search(r", 5[0-9] m north of where it is now", takeoff), takeoff  # the README's 55 m north
@@ -402,7 +402,8 @@ def _airborne(cloud: CloudClient) -> None:
         "target_height": osd["height"] + 20, "security_takeoff_height": 20, "rth_altitude": 30,
         "max_speed": 5, "flight_id": "page-fly",
     }  # fmt: skip
-    assert cloud.service("takeoff_to_point", takeoff)["data"]["result"] == 0
+    reply = cloud.service("takeoff_to_point", takeoff)
+    assert reply["data"]["result"] == 0, reply
     cloud.wait_for("/events", lambda b: (b.get("data") or {}).get("status") == "task_finish", timeout=60)
 
 
