@@ -9,6 +9,10 @@ together (:meth:`gateway.web.state.ConsoleState.gather`, with the same deadline 
 actions run there as coroutines (``run_coroutine_threadsafe``). The only things touched from this thread
 are thread-safe by design: the frame taps (decoded here, off the gateway's loop) and the journal (locked).
 
+Live control from a page (issue #35): a signed-in page's ``{"type": "drc"}`` WebSocket messages (sticks,
+heartbeats, the stop) are handed to ``DrcController.inline_main`` from this thread, as a ``drc/down``
+message on the main link would be; the page's seq is counted here; its WebSocket's loss zeroes its sticks.
+
 Push: one JSON ``state`` message per tick (``console.push_hz``, at most 10 Hz: every device's state at
 most ten times a second), encoded once and offered to every page; a page that reads slowly gets the
 newest state and skips the ones it missed (its queue of journal and frame messages is bounded too).
@@ -74,8 +78,6 @@ CONSOLE_OFF = (
     "DJIGW_CONSOLE__ENABLED=true and a token (DJIGW_CONSOLE__TOKEN, or DJIGW_CONSOLE__TOKEN_FILE naming a "
     "secret file); see docs/console.md"
 )
-#: what a page may send on live control (``{"type": "drc", …}`` on its WebSocket): sticks, heartbeats, stop
-PAGE_DRC = ("drone_control", "heart_beat", "drone_emergency_stop")
 _HEADERS = {
     "X-Content-Type-Options": "nosniff",
     "X-Frame-Options": "DENY",
@@ -118,12 +120,8 @@ class _Page:
         self.queue: deque[str] = deque(maxlen=CLIENT_QUEUE)
         self.wake = asyncio.Event()
         self.frames_sn: str | None = None
-        #: live control from this page: it has sent sticks (its WebSocket's loss zeroes them); the seq of
-        #: its next drone_control and heart_beat (the gateway counts, so a reconnected page starts at 0)
-        self.piloting = False
-        self.refused = False
-        self.seq = 0
-        self.beats = 0
+        #: live control from this page (its seq, whether it has flown: actions.PagePilot)
+        self.pilot = actions.PagePilot()
 
     def offer(self, message: str, *, state: bool = False) -> None:
         if state:
@@ -664,8 +662,8 @@ class WebServer:
                             )
                         )
         finally:
-            if page.piloting:  # the dead-man of a lost WebSocket: the page's sticks zeroed at once
-                self._down(page, "drone_control", {"x": 0.0, "y": 0.0, "h": 0.0, "w": 0.0})
+            if page.pilot.flying:  # the dead-man of a lost WebSocket: the page's sticks zeroed at once
+                self._down(page.pilot.zero())
             self._pages.discard(page)
             sender.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
@@ -674,53 +672,45 @@ class WebServer:
 
     # -- live control from the page (the web thread) -----------------------------------------------------
     def _pilot(self, request: web.Request, page: _Page, ask: dict[str, Any]) -> None:
-        """``{"type": "drc", "csrf", "method", "data"}``: the page's ``drone_control``, ``heart_beat`` or
-        ``drone_emergency_stop``, fed to the live-control session as a ``drc/down`` message on the main
-        link (``DrcController.inline_main``, the path a cloud's takes: its seq rules, stick and heartbeat
-        timeouts, authority and cloud-control checks; answers go out on ``drc/up``). An action: the sign-in
-        session's CSRF token, as for the forms (an emergency stop also from a read-only console). Refused
-        messages are answered to the page (``drc_refused``), audited, never fed."""
+        """``{"type": "drc", "csrf", "method", "data"}``: the page's sticks, heartbeats or stop, fed to the
+        live-control session as a ``drc/down`` message on the main link (``DrcController.inline_main``, the
+        path a cloud's takes: its seq rules, stick and heartbeat timeouts, authority and cloud-control
+        checks; answers go out on ``drc/up``). An action: the sign-in session's CSRF token, as for the forms
+        (a stop also from a read-only console). Refused messages are answered to the page
+        (``drc_refused``), audited once per refused stream, never fed."""
         method = ask.get("method")
+        pilot = page.pilot
+        stop = method == actions.STOP
         headers = {**request.headers, CSRF_HEADER: str(ask.get("csrf") or "")}
-        denied = self._guard().may_act(
-            headers, request.cookies, request.remote or "?", stop=method == "drone_emergency_stop"
-        )
-        if denied is None and (method not in PAGE_DRC or set(ask) - {"type", "csrf", "method", "data"}):
-            denied = Denied(400, f"expected {{type: drc, csrf, method: {'|'.join(PAGE_DRC)}, data}}")
+        denied = self._guard().may_act(headers, request.cookies, request.remote or "?", stop=stop)
+        if denied is None and (
+            method not in actions.PAGE_DRC or set(ask) - {"type", "csrf", "method", "data"}
+        ):
+            denied = Denied(400, f"expected {{type: drc, csrf, method: {'|'.join(actions.PAGE_DRC)}, data}}")
         data = ask.get("data", {})
         if denied is None and not isinstance(data, dict):
             denied = Denied(400, "data: an object")
         if denied is not None:
-            if not page.refused:  # once per page: a stream of refused sticks is one line
+            if not pilot.refused:  # once per refused stream: ten sticks a second are one line
                 audit("console_drc", who=str(page.who), method=str(method)[:32], result="refused",
                       status=denied.status, reason=denied.reason)  # fmt: skip
-            page.refused = True
+            pilot.refused = True
             page.offer(_dumps({"type": "drc_refused", "method": str(method)[:32], "reason": denied.reason}))
             return
-        if method == "drone_emergency_stop":
+        assert isinstance(method, str) and isinstance(data, dict)
+        if stop:
             audit("console_drc", who=str(page.who), method=method, result="sent")
             self.state.journal.note("emergency_stop", method, who=str(page.who), source="page DRC")
-        elif not page.piloting:
+        elif not pilot.flying:
             audit("console_drc", who=str(page.who), method=method, result="piloting")
             self.state.journal.note("action", "drc from the page", who=str(page.who))
-        page.piloting = method != "drone_emergency_stop" or page.piloting
-        page.refused = False
-        self._down(page, str(method), data)
+        pilot.refused = False
+        self._down(pilot.message(method, data))
 
-    def _down(self, page: _Page, method: str, data: dict[str, Any]) -> None:
+    def _down(self, payload: bytes) -> None:
         drc = getattr(self.app, "drc", None)
-        if drc is None:
-            return
-        if method == "drone_control":  # the seq is the page's link's: one page, one increasing count
-            data = {**data, "seq": page.seq}
-            page.seq += 1
-        elif method == "heart_beat":
-            data = {**data, "seq": page.beats}
-            page.beats += 1
-        elif method == "drone_emergency_stop":
-            page.seq = 0  # the stop holds until sticks start again at seq 0 (docs/drc.md)
-        payload = json.dumps({"method": method, "data": data}, separators=(",", ":")).encode()
-        drc.inline_main(drc.down_topic, payload)
+        if drc is not None:
+            drc.inline_main(drc.down_topic, payload)
 
     async def _pump(self) -> None:
         """Once per tick while pages are open: gather on the gateway's loop, offer to every page."""
