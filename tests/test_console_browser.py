@@ -421,7 +421,8 @@ def test_fly_from_the_page_with_the_keyboard_and_its_dead_man(chromium: Any, gat
     """Issue #35: "Fly from this page" grabs flight authority and enters live control; W held flies the
     simulated aircraft ≥ 10 m forward with sticks and heartbeats sent by the page (through its WebSocket,
     the gateway's DRC path); after the key's release, after a window blur (W still held), and after the page
-    closes (W held, its WebSocket lost) the aircraft is below 0.5 m/s within 1 s; X is the emergency stop."""
+    closes (W held, its WebSocket lost) the aircraft is below 0.5 m/s within 1 s; X is the emergency stop,
+    which ends flying from the page until the operator takes control again."""
     page = chromium.new_page()
     errors: list[str] = []
     page.on("pageerror", lambda exc: errors.append(str(exc)))
@@ -459,9 +460,13 @@ def test_fly_from_the_page_with_the_keyboard_and_its_dead_man(chromium: Any, gat
         page.keyboard.press("x")  # the emergency stop from the keyboard while flying
         page.wait_for_selector("#toast div >> text=EMERGENCY STOP sent to", timeout=5000)
         page.wait_for_selector('#drc-facts[data-failsafe="emergency_stop"]', timeout=5000)
-        assert page.get_attribute("#pilot-state", "data-state") == "flying"  # still in control, stopped
+        page.wait_for_selector('#pilot-state[data-state="off"]', timeout=2000)  # flying here ended
+        page.click("#pilot-take")  # taken again deliberately: the new drc_mode_enter ends the stop's hold
+        page.wait_for_selector("#confirm[open]", timeout=5000)
+        page.click("#confirm-ok")
+        page.wait_for_selector('#pilot-state[data-state="flying"]', timeout=10000)
 
-        _hold_forward(page, cloud, 3.0)  # new sticks (seq 0 again) take it on from the stop
+        _hold_forward(page, cloud, 3.0)
         page.close()  # the page and its WebSocket go away with W held
         closed = _stopped_within(cloud, 1.0)
         print(f"flown {flown:.1f} m; below 0.5 m/s {released:.2f} s after release, {blurred:.2f} s after "

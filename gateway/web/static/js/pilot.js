@@ -169,9 +169,7 @@ function onKeyDown(event) {
   const key = event.key.toLowerCase();
   if (key === "x") {
     event.preventDefault();
-    $("#estop").click(); // the one emergency stop: every device, the session holds
-    wire("drone_emergency_stop", {});
-    pilot.held.clear();
+    $("#estop").click(); // the one emergency stop: every device; the session holds, flying here ends
     return;
   }
   if (key === "escape") {
@@ -228,6 +226,11 @@ export function refused(msg) {
 }
 
 export function init() {
+  // the emergency stop (button, X, its access key) ends flying from this page: the session holds until
+  // the operator takes control again (a new drc_mode_enter releases the hold; docs/drc.md)
+  $("#estop").addEventListener("click", () => {
+    if (pilot.flying) stop("EMERGENCY STOP: sticks stopped; take control again to fly");
+  });
   $("#pilot-take").addEventListener("click", take);
   $("#pilot-release").addEventListener("click", release);
   window.addEventListener("keydown", onKeyDown);
