@@ -114,6 +114,7 @@ def run(cfg: Config) -> list[Row]:
                   "drc_drive": True}  # fmt: skip
         settings = load_settings(
             None, gateway_sn=GW, broker={"url": broker.url}, devices=[device], drc={"stick_timeout": 5.0},
+            metrics={"port": 0},  # the endpoint as deployed, on a free port: 9108 may be another gateway's
         )  # fmt: skip
         gw = GatewayThread(settings).start()
         cloud = _client(broker.port, "cloud")

@@ -164,6 +164,8 @@ def _settings_doc(broker_url: str, channel: str) -> dict[str, Any]:
         "broker": {"url": broker_url},
         "dispatcher": {"require_authority": False},
         "devices": [{"type": "rsdk", "sn": "RSDK-BENCH-1", "interface": "virtual", "channel": channel}],
+        # the endpoint as deployed, on a free port: 9108 may be another gateway's (a taken port stops a start)
+        "metrics": {"port": 0},
     }
 
 

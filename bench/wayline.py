@@ -160,7 +160,7 @@ def _one_round(broker: Any, url: str, fingerprint: str, device_cls: Any, model_c
     fc = device_cls(model_cls(home=HOME))
     pty = pty_cls(fc).start()
     device = {"type": "osdk", "sn": "OSDK-BENCH-1", "url": pty.path, "app_id": 1}
-    settings = load_settings(None, gateway_sn=GW, broker={"url": broker.url},
+    settings = load_settings(None, gateway_sn=GW, broker={"url": broker.url}, metrics={"port": 0},
                              dispatcher={"require_authority": False}, devices=[device])  # fmt: skip
     gw = gateway_cls(settings).start()
     cloud = cloud_cls(broker.host, broker.port, GW)

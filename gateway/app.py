@@ -31,9 +31,10 @@ from gateway.northbound import Northbound
 from gateway.observability import Observability
 from gateway.settings import GatewaySettings
 from gateway.store import StateStore
+from gateway.twins import TwinWatch
 from gateway.video.service import LiveService
 from gateway.wayline.service import WaylineService
-from gateway.web.server import WebServer
+from gateway.web.server import WebServer, bind_problem
 from schemas import TopicKind, default_registry, subscriptions, topic
 from schemas.registry import Registry
 
@@ -90,6 +91,12 @@ class GatewayApp:
         self._background: set[asyncio.Task[None]] = set()  # fire-and-forget work kept referenced
         self.observability: Observability | None = None  # /metrics, /healthz, /status, / (None: off)
         self.web: WebServer | None = None  # the aiohttp server (its own thread) that serves them
+        #: what ``dji-gateway run`` exits with: 2 when the HTTP endpoint could not be bound
+        self.exit_code = 0
+        #: another gateway publishing under this one's serial number (gateway/twins.py)
+        self.twins = TwinWatch()
+        self.own_osd = ""
+        self._twin_logged = float("-inf")
         #: told (topic, payload) of every message the northbound and the dispatcher publish, and of every
         #: message the dispatcher is handed (not drc/down, answered inline): the web console's log
         self.published: list[Callable[[str, bytes], None]] = []
@@ -104,6 +111,10 @@ class GatewayApp:
         # topic too: a cloud that reads it as a gateway sends them there
         own = [a.info.sn for a in self.devices if a.info.announce == "gateway"]
         subs += [(topic(TopicKind.SERVICES, sn), 1) for sn in own]
+        # and its own osd topic, at QoS 0: an osd there that this gateway did not send is another gateway's
+        # with the same serial number (gateway/twins.py)
+        self.own_osd = topic(TopicKind.OSD, gw)
+        subs += [(self.own_osd, 0)]
         # build the objects, then connect them with typed callbacks (as paho's are assigned)
         bridge = self.bridge = MqttBridge(
             s.broker.for_live_control(s.drc.heartbeat_timeout),
@@ -114,7 +125,7 @@ class GatewayApp:
             clock=self.clock,
             buffered=lambda name: name.endswith("/osd"),  # osd waits out an outage (bounded), in order
         )
-        outbox = _ObservedOutbox(bridge, self.published)
+        outbox = _ObservedOutbox(bridge, self.published, self.own_osd, self.twins)
         nb = self.northbound = Northbound(
             settings=s,
             registry=self.registry,
@@ -228,13 +239,20 @@ class GatewayApp:
 
     def _serve_web(self, observability: Observability, loop: asyncio.AbstractEventLoop) -> None:
         """Serve the views (``/metrics``, ``/healthz``, ``/status``, the console unless disabled) on the
-        metrics port; on the gateway's loop. A port that cannot be bound leaves both None (logged, never
-        fatal: the bridge matters more than its metrics)."""
+        metrics port; on the gateway's loop. A port that cannot be bound stops the gateway (exit code 2,
+        the port and the setting named): an address printed for it would be answered by whatever holds
+        it, another gateway's console or status (issue #35). ``dji-gateway run`` tries the port before
+        anything starts; this is the race after that check."""
         s = self.settings
-        web = WebServer(observability, s.console, loop).start(s.metrics.host, s.metrics.port)
+        server = WebServer(observability, s.console, loop)
+        web = server.start(s.metrics.host, s.metrics.port)
         if web is not None:
             observability.port = web.port
             self.observability, self.web = observability, web
+            return
+        log.error("%s", bind_problem(s.metrics.host, s.metrics.port, server.bind_error or "no answer"))
+        self.exit_code = 2
+        self.stop_event.set()
 
     def stop(self) -> None:
         self.stop_event.set()
@@ -253,9 +271,27 @@ class GatewayApp:
         queue = self.bridge.queue
         while True:
             item = await queue.get()
+            if item.topic == self.own_osd:  # our own osd coming back, or another gateway's with our SN
+                self._own_osd_heard(item.payload)
+                continue
             for observer in self.received:
                 _tell(observer, item.topic, item.payload)
             self.dispatcher.submit(item.topic, item.payload, item.oversize)
+
+    def _own_osd_heard(self, payload: bytes) -> None:
+        now = self.clock.monotonic()
+        if not self.twins.heard(payload, now):
+            return
+        self.metrics.inc("gateway_sn_conflicts_total")
+        if now - self._twin_logged >= 60.0:  # once a minute while it lasts
+            self._twin_logged = now
+            log.warning(
+                "another gateway publishes as %s on this broker (an osd under this serial number that this "
+                "gateway did not send; %d so far): a cloud takes the two for one. Give each gateway its own "
+                "gateway_sn",
+                self.settings.gateway_sn,
+                self.twins.count,
+            )
 
     async def _shutdown(
         self, periodic: asyncio.Task[None], consumer: asyncio.Task[None], offline: tuple[str, bytes]
@@ -310,11 +346,21 @@ class _ObservedOutbox:
     """The broker connection as the northbound and the dispatcher publish to it, telling ``observers``
     (the web console's log) what went out, after it was handed to the bridge."""
 
-    def __init__(self, bridge: MqttBridge, observers: list[Callable[[str, bytes], None]]) -> None:
+    def __init__(
+        self,
+        bridge: MqttBridge,
+        observers: list[Callable[[str, bytes], None]],
+        own_osd: str = "",
+        twins: TwinWatch | None = None,
+    ) -> None:
         self._bridge = bridge
         self._observers = observers
+        self._own_osd = own_osd
+        self._twins = twins
 
     def publish(self, topic: str, payload: bytes, qos: int = 1, retain: bool = False) -> bool:
+        if self._twins is not None and topic == self._own_osd:
+            self._twins.sent(payload)  # before the broker can echo it back
         ok = self._bridge.publish(topic, payload, qos, retain)
         for observer in self._observers:
             _tell(observer, topic, payload)

@@ -936,7 +936,10 @@ class MqttBridge:
         if msg.topic == self.probe_topic:
             self._probe_back(bytes(msg.payload))
             return
-        self._traffic_at = self._clock()  # the link receives (LivenessProbe.step); a float store, no lock
+        if msg.qos >= self._probe_qos:  # the link receives on the probe's path (LivenessProbe.step): on
+            # NATS a QoS 0 subscription is plain NATS while QoS 1 ones are JetStream consumers, so a QoS 0
+            # message (the gateway's own osd, heard back for twin detection) proves nothing about requests
+            self._traffic_at = self._clock()  # a float store, no lock
         if self.inline is not None:
             try:
                 if self.inline(msg.topic, bytes(msg.payload)):  # paho's payload is bytes: not copied

@@ -74,6 +74,8 @@ HELP: dict[str, str] = {
     "telemetry_delivered_late_total": "Buffered osd delivered after the broker came back, by link",
     "telemetry_requeued_total": "osd written to a connection given up after its last ACK, buffered again",
     "mqtt_subscribe_refused_total": "Subscriptions the broker refused (ACL), by link",
+    "gateway_sn_conflicts_total": "osd under this gateway's serial number that it did not send (another "
+    "gateway with its gateway_sn on the broker)",
     "mqtt_messages_in_total": "MQTT messages received, by link",
     "mqtt_messages_out_total": "MQTT messages published, by link",
     "mqtt_publish_errors_total": "MQTT publishes paho could not queue, by link",
@@ -262,6 +264,8 @@ class Observability:
                 "telemetry_buffered": bridge.buffered if bridge is not None else 0,
                 # another client uses our client id (MQTT 5 0x8E, or 3.1.1 immediate disconnects)
                 "client_id_conflict": bool(bridge is not None and bridge.takeover_suspected),
+                # another gateway publishes under this gateway's serial number (gateway/twins.py)
+                "gateway_sn_conflict": app.twins.snapshot(self._clock()) if hasattr(app, "twins") else None,
             },
             "requests_in_flight": int(getattr(dispatcher, "in_flight", 0)) if dispatcher is not None else 0,
             "devices": devices,

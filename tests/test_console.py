@@ -435,3 +435,45 @@ def test_the_rich_view_fills_the_terminal_height_with_events() -> None:
     assert len(small.splitlines()) <= 30 and len(tall.splitlines()) <= 60
     assert tall.count("event ev_") > small.count("event ev_") >= 3
     assert "event ev_59" in small  # the newest first
+
+
+def test_the_rich_view_fits_80_by_24_with_the_drc_panel_and_the_newest_events() -> None:
+    """Issue #35: the walkthrough's view (the gateway and three devices with osd, a DRC session, a
+    failsafe, events) in a classic 80×24 terminal: nothing cut off below, the DRC state, the sticks and
+    the newest event on screen; a taller terminal gets the full view back."""
+    st = MonitorState(GW)
+    devices = [("RSDK-SIM-0001", "1"), ("RM-SIM-0001", "2"), ("OSDK-SIM-0001", "0")]
+    topo = {"method": "update_topo", "data": {"sub_devices": [{"sn": sn, "domain": d} for sn, d in devices]}}
+    _feed(st, f"sys/product/{GW}/status", topo, 1.0)
+    osd = {
+        "RSDK-SIM-0001": {"gimbal_yaw": 28.0, "gimbal_pitch": -10.0, "gimbal_roll": 0.0,
+                          "payload_index": "20-0-0"},
+        "RM-SIM-0001": {"x_hp": 600, "x_max_hp": 600, "attitude_head": 90.0, "x_shooter_heat": 0},
+        "OSDK-SIM-0001": {"latitude": 22.5431, "longitude": 113.958, "height": 80.0, "elevation": 30.0,
+                          "mode_code": 5, "horizontal_speed": 9.8, "vertical_speed": 0.0,
+                          "attitude_head": 1.0},
+    }  # fmt: skip
+    for sn, data in osd.items():
+        _feed(st, f"thing/product/{sn}/osd", {"gateway": GW, "data": data}, 2.0)
+    _feed(st, f"thing/product/{GW}/osd", {"data": {"drc_state": 2}}, 2.1)
+    _feed(st, f"thing/product/{GW}/drc/down", {"method": "drone_control", "data": {"seq": 9, "y": 1.5}}, 2.2)
+    notify = {"method": "drc_status_notify", "need_reply": 1, "data": {"result": 514301, "drc_state": 2}}
+    _feed(st, f"thing/product/{GW}/events", notify, 2.3)
+    for i in range(30):
+        _feed(st, f"thing/product/{GW}/events", {"tid": f"t{i}", "method": f"ev_{i}", "data": {}}, 3.0 + i)
+
+    def drawn(width: int, height: int) -> list[str]:
+        console = Console(width=width, height=height, record=True, file=io.StringIO(), color_system=None)
+        console.print(render(st, 40.0, "mqtt://127.0.0.1:1883", height=height, width=width))
+        return console.export_text().splitlines()
+
+    small = drawn(80, 24)
+    text = "\n".join(small)
+    assert len(small) <= 24 and all(len(line) <= 80 for line in small), text
+    assert "DRC 2 (in live control)" in text and "514301" in text and "seq=9" in text, text
+    assert "event ev_29" in text and "event ev_28" in text, text  # the newest two at least
+    assert all(sn in text for sn, _ in devices), text  # four rows fit: no device is dropped at 80×24
+    tall = "\n".join(drawn(120, 60))
+    assert "live control (DRC)" in tall and "drc_state" in tall and "mode_code=5(wayline)" in tall
+    tiny = drawn(80, 10)  # smaller still: devices are counted, never cut off mid-panel
+    assert len(tiny) <= 10 and "more device(s)" in "\n".join(tiny) and "DRC 2" in "\n".join(tiny)

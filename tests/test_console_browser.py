@@ -17,6 +17,7 @@ installs it with apt-get), and the test is skipped, saying why, where it cannot 
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import shlex
@@ -180,6 +181,10 @@ def _nest(fields: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+#: (method, the confirmation's text) of every confirmation _send_from_page answered
+CONFIRMED: list[tuple[str, str]] = []
+
+
 def _send_from_page(page: Any, device: str, method: str, fields: dict[str, Any]) -> str:
     """Choose the device and method, type the fields into the generated form, send (confirming when the
     page asks), and return the result the page shows."""
@@ -195,6 +200,7 @@ def _send_from_page(page: Any, device: str, method: str, fields: dict[str, Any])
     page.click("#action-send")
     moves = page.locator("#confirm").evaluate("d => d.open")
     if moves:
+        CONFIRMED.append((method, page.inner_text("#confirm-text")))
         page.click("#confirm-ok")
     page.wait_for_selector(f'#action-result[data-method="{method}"][data-result]', timeout=15000)
     return str(page.get_attribute("#action-result", "data-result"))
@@ -289,6 +295,12 @@ def test_the_readme_walkthrough_in_the_page(chromium: Any, gateway: dict[str, An
                 assert "AA " in page.inner_text("#frame-detail")  # the hex, from the R SDK SOF on
                 _shoot(page.locator("#frames"), shots / "frame-inspector.png")
                 page.fill("#frame-filter", "")
+        # the confirmations said what moves, where and how far (issue #35)
+        said = dict(CONFIRMED)
+        assert "RSDK-SIM-0001" in said["camera_aim"] and "(0.90, 0.50)" in said["camera_aim"], said
+        takeoff = said["takeoff_to_point"]
+        assert "OSDK-SIM-0001 takes off" in takeoff and "at 80 m" in takeoff, takeoff
+        assert re.search(r", 5[0-9] m north of where it is now", takeoff), takeoff  # the README's 55 m north
         # the aircraft takes off and flies north on the map
         wait_until(
             lambda: _number(page, "#map-svg", "data-aircraft-north") > 10.0,
@@ -345,6 +357,127 @@ def test_the_readme_walkthrough_in_the_page(chromium: Any, gateway: dict[str, An
             stop()
         cloud.close()
         page.close()
+
+
+def _drc_osd(cloud: CloudClient) -> dict[str, Any] | None:
+    """The newest ``osd_info_push`` (10 Hz on drc/up while live control is entered): position and speeds."""
+    pushes = cloud.find("drc/up", lambda b: b.get("method") == "osd_info_push")
+    return pushes[-1]["data"] if pushes else None
+
+
+def _speed(osd: dict[str, Any]) -> float:
+    return math.hypot(float(osd["speed_x"]), float(osd["speed_y"]))
+
+
+def _forward(start: dict[str, Any], now: dict[str, Any]) -> float:
+    """How far the aircraft moved along its heading at ``start`` (m)."""
+    north = (now["latitude"] - start["latitude"]) * 111_320.0
+    east = (now["longitude"] - start["longitude"]) * 111_320.0 * math.cos(math.radians(start["latitude"]))
+    head = math.radians(float(start["attitude_head"]))
+    return north * math.cos(head) + east * math.sin(head)
+
+
+def _stopped_within(cloud: CloudClient, seconds: float) -> float:
+    """Seconds until an osd_info_push generated after now shows < 0.5 m/s (asserted within ``seconds``;
+    the time includes the push's trip through the broker and this poll, so it is an upper bound)."""
+    cloud.clear()
+    started = time.monotonic()
+    while time.monotonic() - started < seconds:
+        osd = _drc_osd(cloud)
+        if osd is not None and _speed(osd) < 0.5:
+            return time.monotonic() - started
+        time.sleep(0.02)
+    osd = _drc_osd(cloud)
+    raise AssertionError(f"still {_speed(osd) if osd else '?'} m/s {seconds} s after the dead-man")
+
+
+def _airborne(cloud: CloudClient) -> None:
+    """The aircraft in the air (the walkthrough test leaves it there; alone, this test takes off)."""
+    osd = cloud.wait_for("OSDK-SIM-0001/osd", timeout=10)[-1]["data"]
+    if float(osd.get("elevation") or 0.0) > 5.0:
+        return
+    assert cloud.service("flight_authority_grab")["data"]["result"] == 0
+    takeoff = {
+        "target_latitude": osd["latitude"], "target_longitude": osd["longitude"] + 0.00005,
+        "target_height": osd["height"] + 20, "security_takeoff_height": 20, "rth_altitude": 30,
+        "max_speed": 5, "flight_id": "page-fly",
+    }  # fmt: skip
+    reply = cloud.service("takeoff_to_point", takeoff)
+    assert reply["data"]["result"] == 0, reply
+    cloud.wait_for("/events", lambda b: (b.get("data") or {}).get("status") == "task_finish", timeout=60)
+
+
+def _hold_forward(page: Any, cloud: CloudClient, metres: float, timeout: float = 15.0) -> float:
+    """Hold W until the aircraft has flown ``metres`` forward (from the page's keyboard); the distance."""
+    start = wait_until(lambda: _drc_osd(cloud), 5, what="osd_info_push")
+    page.keyboard.down("w")
+    gone = wait_until(lambda: (d := _forward(start, _drc_osd(cloud) or start)) >= metres and d, timeout,
+                      what=f"{metres} m forward")  # fmt: skip
+    assert _speed(_drc_osd(cloud) or {}) > 1.5  # flying at the page's 2 m/s, not drifting
+    return float(gone)
+
+
+def test_fly_from_the_page_with_the_keyboard_and_its_dead_man(chromium: Any, gateway: dict[str, Any]) -> None:
+    """Issue #35: "Fly from this page" grabs flight authority and enters live control; W held flies the
+    simulated aircraft ≥ 10 m forward with sticks and heartbeats sent by the page (through its WebSocket,
+    the gateway's DRC path); after the key's release, after a window blur (W still held), and after the page
+    closes (W held, its WebSocket lost) the aircraft is below 0.5 m/s within 1 s; X is the emergency stop,
+    which ends flying from the page until the operator takes control again."""
+    page = chromium.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    cloud = CloudClient(gateway["broker"].host, gateway["broker"].port, GW)
+    try:
+        _airborne(cloud)
+        page.goto(gateway["url"] + "/")
+        page.wait_for_selector('#device-table tr[data-sn="OSDK-SIM-0001"][data-online="true"]', timeout=10000)
+        session = page.evaluate("() => fetch('/api/session').then(r => r.json())")
+        if not session.get("signed_in"):
+            page.fill("#token", TOKEN)
+            page.click("#signin button")
+        page.wait_for_selector("#signedin:not([hidden])", timeout=5000)
+        page.click("#pilot-take")
+        page.wait_for_selector("#confirm[open]", timeout=5000)
+        text = page.inner_text("#confirm-text")
+        assert "OSDK-SIM-0001" in text and "2 m/s" in text, text  # what moves, how fast
+        page.click("#confirm-ok")
+        try:
+            page.wait_for_selector('#pilot-state[data-state="flying"]', timeout=10000)
+        except Exception as exc:
+            raise AssertionError(f"not flying from the page: {page.inner_text('#pilot-state')}") from exc
+        page.wait_for_selector('#drc-facts[data-state="2"]', timeout=10000)
+
+        flown = _hold_forward(page, cloud, 10.0)
+        page.keyboard.up("w")
+        released = _stopped_within(cloud, 1.0)
+        assert page.get_attribute("#pilot-sticks", "data-y") == "0"
+
+        _hold_forward(page, cloud, 3.0)
+        page.evaluate("() => window.dispatchEvent(new Event('blur'))")  # W is still held
+        blurred = _stopped_within(cloud, 1.0)
+        page.keyboard.up("w")
+
+        page.keyboard.press("x")  # the emergency stop from the keyboard while flying
+        page.wait_for_selector("#toast div >> text=EMERGENCY STOP sent to", timeout=5000)
+        page.wait_for_selector('#drc-facts[data-failsafe="emergency_stop"]', timeout=5000)
+        page.wait_for_selector('#pilot-state[data-state="off"]', timeout=2000)  # flying here ended
+        page.click("#pilot-take")  # taken again deliberately: the new drc_mode_enter ends the stop's hold
+        page.wait_for_selector("#confirm[open]", timeout=5000)
+        page.click("#confirm-ok")
+        page.wait_for_selector('#pilot-state[data-state="flying"]', timeout=10000)
+
+        _hold_forward(page, cloud, 3.0)
+        page.close()  # the page and its WebSocket go away with W held
+        closed = _stopped_within(cloud, 1.0)
+        print(f"flown {flown:.1f} m; below 0.5 m/s {released:.2f} s after release, {blurred:.2f} s after "
+              f"blur, {closed:.2f} s after the page closed")  # fmt: skip
+        assert not errors, errors
+        audit = [r for r in _audit(gateway["proc"]) if r["event"] == "console_drc"]
+        assert audit and audit[0]["result"] == "piloting" and audit[0]["who"].startswith("session:")
+    finally:
+        cloud.close()
+        if not page.is_closed():
+            page.close()
 
 
 def _png(width: int, height: int, rgb: tuple[int, int, int]) -> bytes:
@@ -639,4 +772,54 @@ def test_the_operator_accepts_a_cloud_control_request_in_the_page(
         assert not errors, errors
     finally:
         cloud.close()
+        page.close()
+
+
+def test_the_phone_view_does_not_overflow_sideways(chromium: Any, gateway: dict[str, Any]) -> None:
+    """Issue #35: at 390 px wide (a phone) the page is one column and nothing is wider than the screen;
+    the tablet width (768 px) too."""
+    page = chromium.new_page()
+    try:
+        for width, height in ((390, 844), (768, 1024)):
+            page.set_viewport_size({"width": width, "height": height})
+            page.goto(gateway["url"] + "/")
+            page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=10000)
+            page.wait_for_selector("#map-svg .aircraft-mark", timeout=10000)
+            wide = page.evaluate("() => document.documentElement.scrollWidth")
+            assert wide <= width, (width, wide)
+            box = page.locator("#estop").bounding_box()
+            assert box is not None and box["x"] + box["width"] <= width
+    finally:
+        page.close()
+
+
+def test_the_page_greys_within_3_s_when_the_gateway_goes_away(chromium: Any, gateway: dict[str, Any]) -> None:
+    """Issue #35: a gateway that stops answering (SIGSTOP: its connection stays open, nothing comes) greys
+    the whole page within 3 s, and it is live again once the gateway is; a gateway that stops (SIGTERM)
+    greys it too. Last in the module: it stops the module's gateway."""
+    import signal
+
+    proc = gateway["proc"]
+    page = chromium.new_page()
+    try:
+        page.goto(gateway["url"] + "/")
+        page.wait_for_selector('#device-table tr[data-sn="OSDK-SIM-0001"][data-fresh="live"]', timeout=10000)
+        assert not page.evaluate("() => document.body.classList.contains('gone')")
+        proc.proc.send_signal(signal.SIGSTOP)
+        started = time.monotonic()
+        try:
+            page.wait_for_function("() => document.body.classList.contains('gone')", timeout=3000, polling=50)
+            hung = time.monotonic() - started
+            assert page.is_visible("#gone")
+            assert page.get_attribute('#device-table tr[data-sn="OSDK-SIM-0001"]', "data-fresh") == "unknown"
+        finally:
+            proc.proc.send_signal(signal.SIGCONT)
+        page.wait_for_function("() => !document.body.classList.contains('gone')", timeout=10000)
+        stopper = threading.Thread(target=proc.stop, kwargs={"timeout": 20})
+        stopper.start()
+        page.wait_for_function("() => document.body.classList.contains('gone')", timeout=20000, polling=50)
+        stopper.join(25)
+        print(f"greyed {hung:.2f} s after the gateway stopped answering")
+        assert hung < 3.0
+    finally:
         page.close()

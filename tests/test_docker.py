@@ -143,3 +143,30 @@ def test_docker_compose_config_accepts_both_files() -> None:
             [*docker_compose, *args, "config", "-q"], capture_output=True, text=True, timeout=60
         )
         assert done.returncode == 0, (files, done.stderr)
+
+
+def test_the_compose_gateway_serves_the_console_with_a_token() -> None:
+    """Issue #35: the stack's console is on, with a token from the environment (``docker compose config``
+    shows it where the client is installed), and the gateway's settings accept it as bound in its
+    container (0.0.0.0 needs the token)."""
+    gw = _compose("docker-compose.yml")["services"]["gateway"]
+    env = gw["environment"]
+    assert env["DJIGW_CONSOLE__ENABLED"] == "true"
+    assert env["DJIGW_CONSOLE__TOKEN"] == "${DJIGW_CONSOLE_TOKEN:-change-me-console-token}"
+    docker_compose = docker_compose_client()
+    if docker_compose is not None:
+        done = subprocess.run(
+            [*docker_compose, "-f", str(REPO / "docker-compose.yml"), "config", "--format", "json"],
+            capture_output=True, text=True, timeout=60, env={**os.environ, "DJIGW_CONSOLE_TOKEN": "t" * 20},
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        resolved = json.loads(done.stdout)["services"]["gateway"]["environment"]
+        assert resolved["DJIGW_CONSOLE__ENABLED"] == "true" and resolved["DJIGW_CONSOLE__TOKEN"] == "t" * 20
+    config = REPO / gw["volumes"][0].split(":")[0]
+    token = env["DJIGW_CONSOLE__TOKEN"].split(":-", 1)[1].rstrip("}")
+    settings = load_settings(
+        config, console={"enabled": env["DJIGW_CONSOLE__ENABLED"] == "true", "token": token}
+    )
+    assert settings.metrics.host == "0.0.0.0" and settings.console.enabled
+    assert "9108:9108" in gw["ports"][0] and settings.metrics.port == 9108
+    assert "DJIGW_CONSOLE_TOKEN" in (REPO / "docs" / "console.md").read_text()  # documented

@@ -300,7 +300,8 @@ def test_a_silent_robot_goes_offline_and_comes_back(broker: LocalBroker, tmp_pat
 
 
 def test_simulated_robot_of_run_simulate(broker: LocalBroker) -> None:
-    doc = simulated_settings({"broker": {"url": f"mqtt://127.0.0.1:{broker.port}"}, "osd_period": 0.2})
+    doc = simulated_settings({"broker": {"url": f"mqtt://127.0.0.1:{broker.port}"}, "osd_period": 0.2,
+                              "metrics": {"enabled": False}})  # fmt: skip
     doc["devices"] = [d for d in doc["devices"] if d["type"] == "robomaster"]
     sims: list[Any] = []
     settings = start_simulators(load_settings(None, **doc), sims)

@@ -142,6 +142,8 @@ def _config(tmp_path: Any, broker: LocalBroker, url: str, sn: str) -> str:
 url = "{broker.url}"
 [dispatcher]
 require_authority = false
+[metrics]
+enabled = false  # not 9108: another gateway on this machine may hold it, and a taken port stops the start
 [[devices]]
 type = "rsdk"
 sn = "{sn}"

@@ -568,3 +568,119 @@ def test_a_long_wayline_route_is_decimated_for_the_map_and_built_once() -> None:
     assert shown is not None and shown["reached"] == 50_010 and shown["total"] == 100_000
     assert len(json.dumps(shown)) < 1000  # what is pushed at push_hz stays small
     assert console.route_view("other") is None
+
+
+def test_the_inspector_keeps_the_gateways_own_commands_through_a_flood_of_pushes() -> None:
+    """Issue #35: the frame inspector opened after the send (the README's order) still shows the
+    command the gateway sent, though the device's pushes have filled the ring of all records since."""
+    inspector = LinkInspector(family="rsdk", kind="can", where="can0", keep=20)
+    aim = {"yaw_angle": 280, "roll_angle": 0, "pitch_angle": 0, "ctrl_byte": 1, "time_for_action": 5}
+    for arb, data in encode_can("position_control", 0x42, aim):
+        inspector.tap("tx", arb, data)
+    for seq in range(60):  # the gimbal's pushes: far more records than the ring holds
+        for arb, data in encode_can("position_control", seq, {"return_code": 0}, reply=True, legacy=True):
+            inspector.tap("rx", arb, data)
+    assert all(r[2] == "rx" for r in inspector.tap.records)  # the command has left the ring of all records
+    frames = inspector.poll()
+    sent = [f for f in frames if f["dir"] == "tx"]
+    assert [(f["command"], f["seq"], f["valid"]) for f in sent] == [("position_control", 0x42, True)]
+    assert any(f["dir"] == "rx" for f in frames)  # and the newest pushes after it
+    assert inspector.poll() == []  # each record is decoded once
+
+
+def test_live_control_from_the_page_needs_a_session_and_its_lost_websocket_zeroes_the_sticks(
+    private_broker: LocalBroker, can_channel: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Issue #35, the gateway side of flying from the page: a page's ``{"type": "drc"}`` message is fed to
+    the live-control session only from a signed-in page with its CSRF token (else ``drc_refused``,
+    audited once); its sticks drive the session as a cloud's drc/down would (the gateway numbers its seq);
+    and when its WebSocket closes the set-point is zeroed at once, long before ``drc.stick_timeout``
+    (5 s here) would."""
+    caplog.set_level(logging.INFO, logger=AUDIT_LOGGER)
+    sim = GimbalCanSim(interface="virtual", channel=can_channel).start()
+    device = {
+        "type": "rsdk",
+        "sn": SN,
+        "payload_index": "20-0-0",
+        "interface": "virtual",
+        "channel": can_channel,
+    }
+    http = {"enabled": True, "port": 0}
+    settings = gateway_settings(private_broker.port, [device], gateway_sn=GW, metrics=http,
+                                console={"token": TOKEN}, drc={"stick_timeout": 5.0})  # fmt: skip
+    gw = GatewayThread(settings).start()
+    try:
+        wait_until(lambda: gw.app.devices.by_sn(SN).online, 5, what="gimbal online")
+        assert gw.app.observability is not None
+        port = gw.app.observability.port
+        origin = {"Origin": f"http://127.0.0.1:{port}"}
+        _, catalog, _ = request(port, "GET", "/api/catalog")
+        enter = catalog["gateway"]["prefill"]
+        enter["mqtt_broker"]["password"] = "-"
+        for method, data in (
+            ("payload_authority_grab", {"payload_index": "20-0-0"}),
+            ("drc_mode_enter", enter),
+        ):
+            body = {"method": method, "data": data, "confirm": True}
+            status, out, _ = request(port, "POST", "/api/action", body, bearer(port))
+            assert status == 200 and out["result"] == 0, (method, out)
+        drc = gw.app.drc
+        assert drc is not None
+
+        async def page() -> tuple[dict[str, Any], float]:
+            # unsafe: the jar keeps the session cookie of an IP address (127.0.0.1), as a browser does
+            async with aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True)) as session:
+                url = f"http://127.0.0.1:{port}/api/ws"
+                # not signed in: refused, never fed
+                async with session.ws_connect(url, headers=origin) as ws:
+                    await ws.send_str(json.dumps({"type": "drc", "csrf": "x", "method": "drone_control",
+                                                  "data": {"x": 0, "y": 0.5, "h": 0, "w": 0}}))  # fmt: skip
+                    refused = await _next(ws, "drc_refused")
+                assert "sign in" in refused["reason"] and drc.session.snapshot(drc.now())["last_seq"] is None
+                async with session.post(f"http://127.0.0.1:{port}/api/session", json={"token": TOKEN},
+                                        headers=origin) as resp:  # fmt: skip
+                    csrf = (await resp.json())["csrf"]
+                async with session.ws_connect(url, headers=origin) as ws:
+                    beat = {"timestamp": int(time.time() * 1000)}
+                    await ws.send_str(
+                        json.dumps({"type": "drc", "csrf": "no", "method": "heart_beat", "data": beat})
+                    )
+                    assert "CSRF" in (await _next(ws, "drc_refused"))["reason"]
+                    for _ in range(3):
+                        beat = {"timestamp": int(time.time() * 1000)}
+                        await ws.send_str(
+                            json.dumps({"type": "drc", "csrf": csrf, "method": "heart_beat", "data": beat})
+                        )
+                        stick = {"x": 0, "y": 0.5, "h": 0, "w": 0}
+                        await ws.send_str(
+                            json.dumps(
+                                {"type": "drc", "csrf": csrf, "method": "drone_control", "data": stick}
+                            )
+                        )
+                        await asyncio.sleep(0.1)
+                    flying = drc.snapshot()
+                closed = time.monotonic()
+                await asyncio.to_thread(
+                    wait_until, lambda: drc.snapshot()["setpoint"]["forward"] == 0.0, 2, what="zeroed"
+                )
+                return flying, time.monotonic() - closed
+
+        flying, zeroed_after = asyncio.run(page())
+        assert flying["setpoint"]["forward"] == 0.5 and flying["last_seq"] == 2, flying  # seq 0, 1, 2
+        assert zeroed_after < 1.0  # the WebSocket's loss, not the 5 s stick timeout
+        records = [r for r in audit_records(caplog) if r["event"] == "console_drc"]
+        assert [r["result"] for r in records] == ["refused", "refused", "piloting"], records
+        assert records[-1]["who"].startswith("session:")
+    finally:
+        gw.stop()
+        sim.stop()
+
+
+async def _next(ws: aiohttp.ClientWebSocketResponse, kind: str, timeout: float = 5.0) -> dict[str, Any]:
+    """The next message of that type on a console WebSocket (the state pushes in between are skipped)."""
+    end = time.monotonic() + timeout
+    while (left := end - time.monotonic()) > 0:
+        msg = await ws.receive(timeout=left)
+        if msg.type == aiohttp.WSMsgType.TEXT and json.loads(msg.data).get("type") == kind:
+            return dict(json.loads(msg.data))
+    raise AssertionError(f"no {kind} message within {timeout} s")

@@ -364,8 +364,15 @@ class GatewaysSeen:
         if isinstance(body, dict) and isinstance(body.get("gateway"), str):
             self.serials.add(body["gateway"])
 
-    def advice(self, wanted: str) -> str:
-        """One sentence: which gateways are there, or that none is."""
+    def advice(self, wanted: str, drc: str | None = None) -> str:
+        """One sentence: which gateways are there, or that none is. ``drc``: the broker a ``--drc`` message
+        went to (a gateway that is here and does not answer it has no live-control session on it)."""
+        if wanted in self.serials and drc is not None:
+            return (
+                f"gateway {wanted} is on this broker but its live control does not ride it: enter it with "
+                f"drc_mode_enter mqtt_broker.address naming this broker ({drc}), or send to the broker that "
+                "drc_mode_enter named"
+            )
         if wanted in self.serials:
             return f"gateway {wanted} is on this broker but did not answer (is the method slow? --timeout)"
         if not self.serials:
@@ -449,12 +456,16 @@ def _send(ns: argparse.Namespace) -> int:
         link.publish(request_topic, body, qos=0 if ns.drc else 1)
         wait = min(ns.timeout, SILENT_WAIT)
         if silent and not arrived.wait(wait):
-            print(f"sent {ns.method}: not refused within {wait:g}s (an accepted one is not answered)")
+            print(
+                f"sent {ns.method}: not refused within {wait:g}s (an accepted one is not answered; it moves "
+                "nothing unless live control rides this broker: the monitor's DRC panel or "
+                "`dji-gateway status` shows drc_state 2)"
+            )
             return EXIT_OK
         if not arrived.wait(ns.timeout):
             print(
                 f"dji-gateway send: no reply to {ns.method} from {gw} within {ns.timeout:g}s; "
-                + seen.advice(gw),
+                + seen.advice(gw, drc=f"{link.settings.host}:{link.settings.port}" if ns.drc else None),
                 file=sys.stderr,
             )
             return EXIT_TIMEOUT
@@ -821,21 +832,47 @@ def render(
     state: MonitorState, now: float, broker: str = "", height: int | None = None, width: int = 120
 ) -> RenderableType:
     """The live view: devices (online, osd), the DRC session, the latest events and replies: as many as
-    fit in ``height`` rows of ``width`` columns (the terminal's), or 12 when no height is given."""
+    fit in ``height`` rows of ``width`` columns (the terminal's), or 12 when no height is given.
+
+    It always fits (issue #35: 80×24 shows the DRC panel and the newest events): when the full view does
+    not, the devices collapse to one line each and the DRC panel to two lines without a frame; when that
+    is still too tall, the devices that do not fit are counted ("… 2 more device(s)") and the events keep
+    at least two rows."""
     if height is None:
         return _view(state, now, broker, 12)
     from rich.console import Console
 
-    # measure the view without events at this width (lines wrap), and give the events what is left
     console = Console(width=width, file=io.StringIO())
-    bare = len(console.render_lines(_view(state, now, broker, 0), console.options, pad=False))
-    return _view(state, now, broker, max(3, height - bare - 1))
+
+    def lines(view: RenderableType) -> int:
+        return len(console.render_lines(view, console.options, pad=False))
+
+    # measure the view without events at this width (lines wrap), and give the events what is left
+    bare = lines(_view(state, now, broker, 0))
+    if height - bare - 1 >= 3:
+        return _view(state, now, broker, height - bare - 1)
+    shown = len(state.devices)
+    while True:
+        bare = lines(_view(state, now, broker, 0, compact=True, devices=shown))
+        if height - bare - 1 >= 2 or shown == 0:
+            return _view(state, now, broker, max(1, height - bare - 1), compact=True, devices=shown)
+        shown -= 1
 
 
-def _view(state: MonitorState, now: float, broker: str, rows: int) -> RenderableType:
+def _view(
+    state: MonitorState,
+    now: float,
+    broker: str,
+    rows: int,
+    *,
+    compact: bool = False,
+    devices: int | None = None,
+) -> RenderableType:
+    from rich import box
     from rich.console import Group
     from rich.panel import Panel
     from rich.table import Table
+    from rich.text import Text
 
     gw = state.gateway_sn
     title = f"dji-gateway monitor · gateway {gw}" + (f" · {broker}" if broker else "")
@@ -851,45 +888,74 @@ def _view(state: MonitorState, now: float, broker: str, rows: int) -> Renderable
         )
     else:
         head = "waiting for the gateway (is it running and connected to this broker?)"
-    devices = Table(title="devices", expand=True, title_justify="left")
-    for name in ("sn", "domain", "online", "osd age", "osd"):
-        devices.add_column(name, overflow="fold", ratio=4 if name == "osd" else None)
-    for view in state.devices.values():
-        devices.add_row(
+    frame = None if compact else box.HEAVY_HEAD  # rich's default table box, or none when collapsed
+    table = Table(title=None if compact else "devices", expand=True, title_justify="left",
+                  show_header=not compact, box=frame)  # fmt: skip
+    columns = ("sn", "online", "osd age", "osd") if compact else ("sn", "domain", "online", "osd age", "osd")
+    for name in columns:
+        table.add_column(
+            name,
+            overflow="ellipsis" if compact else "fold",
+            no_wrap=compact,
+            ratio=4 if name == "osd" else None,
+        )
+    views = list(state.devices.values())
+    shown = views if devices is None else views[:devices]
+    for view in shown:
+        cells = [
             view.sn,
             view.domain if view.domain != "?" else "—",
             "[green]online[/]" if view.online else "[red]offline[/]",
             _age(now, view.osd_at),
             osd_summary(view.osd, limit=10),
-        )
+        ]
+        if compact:
+            del cells[1]
+        table.add_row(*cells)
     drc = state.drc
-    drc_table = Table.grid(padding=(0, 2))
-    drc_table.add_column(style="bold")
-    drc_table.add_column()
     names = {0: "idle", 1: "connecting", 2: "in live control"}
-    drc_table.add_row("drc_state", f"{drc.state} ({names.get(drc.state, '?')})")
     rtt = "—" if drc.rtt_ms is None else f"{drc.rtt_ms:.1f} ms (avg {drc.rtt_avg_ms:.1f} ms)"
-    drc_table.add_row(
-        "heartbeat", f"{drc.heartbeats} echoed, last {_age(now, drc.heartbeat_at)} ago, rtt {rtt}"
-    )
     sticks = (
         " ".join(f"{k}={_num(drc.stick[k])}" for k in ("seq", "x", "y", "h", "w") if k in drc.stick) or "—"
     )
     refused = f" (refused {drc.stick_result})" if drc.stick_result else ""
-    drc_table.add_row("sticks", f"{sticks}, {_age(now, drc.stick_at)} ago{refused}")
     failsafe = "none" if drc.failsafe is None else f"[red]{drc.failsafe}[/] {_age(now, drc.failsafe_at)} ago"
+    events = Table(title=None if compact else "events and replies", expand=True, title_justify="left",
+                   show_header=False, box=frame)  # fmt: skip
+    events.add_column("age", width=7, no_wrap=True)
+    events.add_column("what", overflow="ellipsis", no_wrap=True, ratio=1)
+    for at, text in list(state.events)[::-1][:rows]:
+        events.add_row(_age(now, at), text)
+    if compact:
+        drc_lines = Table.grid(expand=True)
+        drc_lines.add_column(overflow="ellipsis", no_wrap=True)
+        drc_lines.add_row(
+            f"[bold]DRC {drc.state} ({names.get(drc.state, '?')})[/] · failsafe {failsafe} · "
+            f"heartbeat {drc.heartbeats}, {_age(now, drc.heartbeat_at)} ago, rtt {rtt}"
+        )
+        drc_lines.add_row(f"[bold]sticks[/] {sticks}, {_age(now, drc.stick_at)} ago{refused}")
+        hidden = len(views) - len(shown)
+        more = (
+            [Text(f"… {hidden} more device(s): a taller terminal shows them", style="dim")] if hidden else []
+        )
+        parts: list[RenderableType] = [Text(head, overflow="ellipsis", no_wrap=True), table, *more, drc_lines]
+        return Panel(Group(*parts, Text("events and replies", style="bold"), events), title=title,
+                     title_align="left")  # fmt: skip
+    drc_table = Table.grid(padding=(0, 2))
+    drc_table.add_column(style="bold")
+    drc_table.add_column()
+    drc_table.add_row("drc_state", f"{drc.state} ({names.get(drc.state, '?')})")
+    drc_table.add_row(
+        "heartbeat", f"{drc.heartbeats} echoed, last {_age(now, drc.heartbeat_at)} ago, rtt {rtt}"
+    )
+    drc_table.add_row("sticks", f"{sticks}, {_age(now, drc.stick_at)} ago{refused}")
     drc_table.add_row("failsafe", failsafe)
     if drc.delay_ms is not None:
         drc_table.add_row("command delay", f"{drc.delay_ms} ms")
     if drc.push:
         drc_table.add_row("osd_info_push", osd_summary(drc.push, limit=8))
-    events = Table(title="events and replies", expand=True, title_justify="left", show_header=False)
-    events.add_column("age", width=7, no_wrap=True)
-    events.add_column("what", overflow="ellipsis", no_wrap=True, ratio=1)
-    for at, text in list(state.events)[::-1][:rows]:
-        events.add_row(_age(now, at), text)
     return Panel(
-        Group(head, devices, Panel(drc_table, title="live control (DRC)", title_align="left"), events),
+        Group(head, table, Panel(drc_table, title="live control (DRC)", title_align="left"), events),
         title=title,
         title_align="left",
     )

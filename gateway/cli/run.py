@@ -142,6 +142,10 @@ def cmd_run(ns: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:
         print(f"dji-gateway: cannot read config: {exc}", file=sys.stderr)
         return 2
+    problem = http_port_problem(settings)
+    if problem is not None:  # before anything starts: no device touched, no topology published
+        print(f"dji-gateway: {problem}", file=sys.stderr)
+        return 2
     setup_logging(settings.log_level, settings.log_json)
     from gateway.environment import warnings
 
@@ -150,6 +154,27 @@ def cmd_run(ns: argparse.Namespace) -> int:
     for line in file_warnings:
         log.warning("%s", line)
     return asyncio.run(serve(settings, simulate=ns.simulate))
+
+
+def http_port_problem(settings: GatewaySettings) -> str | None:
+    """Why the HTTP endpoint's port cannot be bound now (None when it can, or when none is asked for):
+    tried before the gateway starts, so a taken port stops the start instead of leaving an address
+    printed that another process answers (issue #35). The server's own bind is still checked (a race)."""
+    import socket
+
+    from gateway.web.server import bind_problem
+
+    m = settings.metrics
+    if not m.enabled or m.port == 0:
+        return None
+    family = socket.AF_INET6 if ":" in m.host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as aiohttp binds: TIME_WAIT is free
+        try:
+            probe.bind((m.host, m.port))
+        except OSError as exc:
+            return bind_problem(m.host, m.port, exc.strerror or str(exc))
+    return None
 
 
 async def serve(settings: GatewaySettings, *, simulate: bool) -> int:
@@ -170,7 +195,7 @@ async def serve(settings: GatewaySettings, *, simulate: bool) -> int:
     finally:
         for sim in sims:
             sim.stop()
-    return 0
+    return app.exit_code
 
 
 def start_simulators(settings: GatewaySettings, sims: list[InProcessSim]) -> GatewaySettings:

@@ -97,6 +97,14 @@ def _print(doc: dict[str, Any]) -> None:
         + f" · inbound queue {broker.get('inbound_queue', 0)}"
         + f" · requests in flight {doc.get('requests_in_flight')}"
     )
+    twin = broker.get("gateway_sn_conflict") or {}
+    if twin.get("count"):
+        now = "now" if twin.get("active") else f"last {twin.get('last_age_s')} s ago"
+        console.print(
+            f"[bold red]ANOTHER GATEWAY publishes as {doc.get('gateway_sn')} on this broker[/] ({now}, "
+            f"{twin.get('count')} osd it did not send): a cloud takes the two for one; give each its own "
+            "gateway_sn"
+        )
     table = Table(title="devices", title_justify="left")
     for name in ("sn", "type", "online", "authority", "link", "frames in/out", "crc/framing errors", "opens"):
         table.add_column(name)

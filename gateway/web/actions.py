@@ -9,9 +9,11 @@ routed, authority-checked, time-limited and counted exactly like one from the cl
 is the DRC session's emergency stop (every device's ``emergency_stop``, a session holds) followed by every
 adapter's ``stop_motion`` (missions cancelled, loops ended), as at shutdown. The operator's answer to a
 cloud-control request (accept, deny, revoke) goes to :meth:`gateway.cloud_control.CloudControl.decide`.
+Live control from a page (:class:`PagePilot`): which DRC messages a page may send and the ``drc/down``
+body each becomes, with the seq counted for that page.
 
-Everything here but :func:`catalogue` runs on the gateway's event loop. Must not know HTTP, sessions or
-the page.
+Everything here but :func:`catalogue` and :class:`PagePilot` (the web thread's, one per page) runs on the
+gateway's event loop. Must not know HTTP, sessions or the page.
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ from schemas.registry import Registry
 __all__ = [
     "DECISIONS",
     "GATEWAY_METHODS",
+    "PAGE_DRC",
+    "PagePilot",
     "catalogue",
     "cloud_control_decision",
     "emergency_stop",
@@ -151,6 +155,42 @@ async def emergency_stop(app: Any) -> dict[str, Any]:
     outcomes = await asyncio.gather(*(a.stop_motion() for a in adapters), return_exceptions=True)
     failed = {a.info.sn: f"{type(o).__name__}: {o}" for a, o in zip(adapters, outcomes, strict=True) if o}
     return {"stopped": [a.info.sn for a in adapters if a.info.sn not in failed], "failed": failed}
+
+
+#: what a page may send on live control (``{"type": "drc", …}`` on its WebSocket): sticks, heartbeats, stop
+PAGE_DRC = ("drone_control", "heart_beat", "drone_emergency_stop")
+STOP = "drone_emergency_stop"
+
+
+class PagePilot:
+    """One page's live control (docs/console.md, "Flying from the page"): the ``drc/down`` message each
+    of its WebSocket messages becomes, with the seq the gateway counts for it (one page, one increasing
+    count; a reconnected page starts at 0), and whether it has flown (its WebSocket's loss then zeroes
+    its sticks: :meth:`zero`)."""
+
+    def __init__(self) -> None:
+        self.flying = False
+        self.refused = False
+        self._seq = 0
+        self._beats = 0
+
+    def message(self, method: str, data: dict[str, Any]) -> bytes:
+        """The drc/down body for one of :data:`PAGE_DRC` (already checked by the caller)."""
+        if method == "drone_control":
+            data = {**data, "seq": self._seq}
+            self._seq += 1
+            self.flying = True
+        elif method == "heart_beat":
+            data = {**data, "seq": self._beats}
+            self._beats += 1
+            self.flying = True
+        elif method == STOP:
+            self._seq = 0  # the stop holds until sticks start again at seq 0 (docs/drc.md)
+        return json.dumps({"method": method, "data": data}, separators=(",", ":")).encode()
+
+    def zero(self) -> bytes:
+        """A zero stick (the dead-man of a lost WebSocket)."""
+        return self.message("drone_control", {"x": 0.0, "y": 0.0, "h": 0.0, "w": 0.0})
 
 
 #: the operator's answers to cloud-control authorisation (gateway/cloud_control.py)

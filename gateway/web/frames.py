@@ -54,21 +54,29 @@ def inspectable(family: str) -> ModuleType | None:
 class FrameTap:
     """A link's observer: ``tap(direction, can_id, data)`` from any thread keeps the last ``keep`` records."""
 
-    __slots__ = ("_clock", "_count", "records")
+    __slots__ = ("_clock", "_count", "records", "sent")
 
     def __init__(self, keep: int, clock: Clock = SYSTEM_CLOCK) -> None:
         self.records: deque[Record] = deque(maxlen=keep)
+        #: the records sent, kept apart: a device's flood of pushes must not push the gateway's own
+        #: commands out before anyone looked (issue #35: the inspector opened after the send shows it)
+        self.sent: deque[Record] = deque(maxlen=keep)
         self._count = itertools.count()
         self._clock = clock  # read from the link's threads: a clock's reads are thread-safe
 
     def __call__(self, direction: str, can_id: int | None, data: bytes) -> None:
-        self.records.append((next(self._count), self._clock.time_ms() / 1000, direction, can_id, data))
+        record = (next(self._count), self._clock.time_ms() / 1000, direction, can_id, data)
+        self.records.append(record)
+        if direction == "tx":
+            self.sent.append(record)
 
-    def snapshot(self) -> tuple[Record, ...]:
-        """The records now held, oldest first (a copy: the link's threads keep appending)."""
+    def snapshot(self, sent: bool = False) -> tuple[Record, ...]:
+        """The records now held (``sent``: the ones sent), oldest first (a copy: the link's threads keep
+        appending)."""
+        held = self.sent if sent else self.records
         for _ in range(10):
             try:
-                return tuple(self.records)
+                return tuple(held)
             except RuntimeError:  # appended to while copied; the copy is retried
                 continue
         return ()
@@ -131,11 +139,18 @@ class LinkInspector:
         newest frames, a flood must not make it decode the past."""
         with self._lock:
             new: list[dict[str, Any]] = []
-            pending = [r for r in self.tap.snapshot() if r[0] > self._last]
+            held = self.tap.snapshot()
+            pending = [r for r in held if r[0] > self._last]
+            # what was sent and has left the ring of all records unread (a device's pushes flooded it):
+            # decoded from the ring of sent records first, so the gateway's own commands are never lost
+            oldest = held[0][0] if held else 0
+            lost_sent = [r for r in self.tap.snapshot(sent=True) if self._last < r[0] < oldest]
+            if catch_up is not None:
+                lost_sent = lost_sent[-catch_up:]
             if catch_up is not None and len(pending) > catch_up:
                 self.skipped += len(pending) - catch_up
                 pending = pending[-catch_up:]
-            for n, t, direction, can_id, data in pending[:limit]:
+            for n, t, direction, can_id, data in [*lost_sent, *pending[:limit]]:
                 if n != self._last + 1:  # records were dropped (by the tap, or skipped to catch up)
                     self.gaps += 1
                     self._streams.clear()  # a frame may have lost its middle: start again on a SOF

@@ -9,6 +9,10 @@ together (:meth:`gateway.web.state.ConsoleState.gather`, with the same deadline 
 actions run there as coroutines (``run_coroutine_threadsafe``). The only things touched from this thread
 are thread-safe by design: the frame taps (decoded here, off the gateway's loop) and the journal (locked).
 
+Live control from a page (issue #35): a signed-in page's ``{"type": "drc"}`` WebSocket messages (sticks,
+heartbeats, the stop) are handed to ``DrcController.inline_main`` from this thread, as a ``drc/down``
+message on the main link would be; the page's seq is counted here; its WebSocket's loss zeroes its sticks.
+
 Push: one JSON ``state`` message per tick (``console.push_hz``, at most 10 Hz: every device's state at
 most ten times a second), encoded once and offered to every page; a page that reads slowly gets the
 newest state and skips the ones it missed (its queue of journal and frame messages is bounded too).
@@ -49,13 +53,13 @@ from gateway.settings import ConsoleSettings
 from gateway.web import actions
 from gateway.web.frames import LinkInspector
 from gateway.web.journal import redact
-from gateway.web.security import COOKIE, Denied, Guard, Who
+from gateway.web.security import COOKIE, CSRF_HEADER, Denied, Guard, Who
 from gateway.web.state import ConsoleState
 from gateway.web.video import VideoRoutes
 
 log = logging.getLogger(__name__)
 
-__all__ = ["STATIC", "WebServer"]
+__all__ = ["STATIC", "WebServer", "bind_problem"]
 
 STATIC = Path(str(resources.files("gateway.web") / "static"))
 #: a page's queue of journal and frame messages; older ones are dropped first when it reads too slowly
@@ -69,12 +73,31 @@ DECODE_SLICE = 8
 DECODE_PER_TICK = 120
 DECODE_PAUSE = 0.001
 _JSON = "application/json"
+#: what ``/`` answers and the start logs when the console is off (never a bare 404: issue #35)
+CONSOLE_OFF = (
+    "the web console is off in this gateway (console.enabled = false): turn it on with "
+    "DJIGW_CONSOLE__ENABLED=true and a token (DJIGW_CONSOLE__TOKEN, or DJIGW_CONSOLE__TOKEN_FILE naming a "
+    "secret file); see docs/console.md"
+)
 _HEADERS = {
     "X-Content-Type-Options": "nosniff",
     "X-Frame-Options": "DENY",
     "Referrer-Policy": "same-origin",
     "Cache-Control": "no-store",
 }
+
+
+#: where the HTTP endpoint's port is set, named in the message when it cannot be bound
+PORT_SETTING = "--metrics-port, DJIGW_METRICS__PORT or [metrics] port (0: any free port)"
+
+
+def bind_problem(host: str, port: int, reason: str) -> str:
+    """The one message for an HTTP port that cannot be bound: the address, why, and the setting."""
+    return (
+        f"cannot listen on {host}:{port} for the web console, /metrics, /healthz and /status ({reason}): "
+        f"is another gateway running? Choose another port with {PORT_SETTING}, or turn the endpoint off "
+        "(--no-metrics, metrics.enabled = false)"
+    )
 
 
 def _dumps(value: Any) -> str:
@@ -98,6 +121,8 @@ class _Page:
         self.queue: deque[str] = deque(maxlen=CLIENT_QUEUE)
         self.wake = asyncio.Event()
         self.frames_sn: str | None = None
+        #: live control from this page (its seq, whether it has flown: actions.PagePilot)
+        self.pilot = actions.PagePilot()
 
     def offer(self, message: str, *, state: bool = False) -> None:
         if state:
@@ -120,8 +145,8 @@ class _Page:
 
 
 class WebServer:
-    """The endpoint of one running gateway: ``start(host, port)`` binds it (or logs why not and returns
-    None: the bridge matters more than its metrics), ``stop()`` closes it and every page."""
+    """The endpoint of one running gateway: ``start(host, port)`` binds it (or returns None with the
+    reason in ``bind_error``: the app stops, naming the port), ``stop()`` closes it and every page."""
 
     def __init__(self, observability: Observability, console: ConsoleSettings, gateway_loop: Any) -> None:
         self.obs = observability
@@ -133,6 +158,8 @@ class WebServer:
         )
         self.guard: Guard | None = None
         self.port: int | None = None
+        #: why ``start`` could not listen (the caller names the port and the setting)
+        self.bind_error: str | None = None
         self.loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._runner: web.AppRunner | None = None
@@ -155,11 +182,14 @@ class WebServer:
         ready.wait(15)
         if failure or self.port is None:
             exc = failure[0] if failure else TimeoutError("no answer")
-            reason = getattr(exc, "strerror", None) or str(exc)
-            log.warning("metrics endpoint disabled: cannot listen on %s:%d (%s)", host, port, reason)
+            self.bind_error = getattr(exc, "strerror", None) or str(exc)
+            if failure and self._thread is not None:
+                self._thread.join(5)  # it closes its loop: nothing is left to shut down
             self.stop()
             return None
         log.info("metrics on http://%s:%d/metrics (also /healthz, /status)", host, self.port)
+        if not self.console.enabled:
+            log.info("%s", CONSOLE_OFF)
         if self.console.enabled:
             log.info(
                 "web console on http://%s:%d/ (%s)",
@@ -323,12 +353,14 @@ class WebServer:
         return web.json_response(await asyncio.get_running_loop().run_in_executor(None, self.obs.status))
 
     async def _not_found(self, request: web.Request) -> web.Response:
-        where = (
-            "/ (the console), /metrics, /healthz or /status"
-            if self.console.enabled
-            else ("/metrics, /healthz or /status")
+        if self.console.enabled:
+            return web.Response(status=404, text="try / (the console), /metrics, /healthz or /status\n")
+        off = (
+            f"{CONSOLE_OFF}\n"
+            if request.path == "/" or request.path.startswith(("/api/", "/static/"))
+            else ""
         )
-        return web.Response(status=404, text=f"try {where}\n")
+        return web.Response(status=404, text=f"{off}try /metrics, /healthz or /status\n")
 
     # -- the console ------------------------------------------------------------------------------------
     def _guard(self) -> Guard:
@@ -617,6 +649,9 @@ class WebServer:
                     ask = json.loads(msg.data)
                 except ValueError:
                     continue
+                if isinstance(ask, dict) and ask.get("type") == "drc":
+                    self._pilot(request, page, ask)
+                    continue
                 if isinstance(ask, dict) and ask.get("type") == "frames":
                     sn = ask.get("sn")
                     page.frames_sn = sn if isinstance(sn, str) and sn in self.state.inspectors else None
@@ -635,11 +670,55 @@ class WebServer:
                             )
                         )
         finally:
+            if page.pilot.flying:  # the dead-man of a lost WebSocket: the page's sticks zeroed at once
+                self._down(page.pilot.zero())
             self._pages.discard(page)
             sender.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await sender
         return ws
+
+    # -- live control from the page (the web thread) -----------------------------------------------------
+    def _pilot(self, request: web.Request, page: _Page, ask: dict[str, Any]) -> None:
+        """``{"type": "drc", "csrf", "method", "data"}``: the page's sticks, heartbeats or stop, fed to the
+        live-control session as a ``drc/down`` message on the main link (``DrcController.inline_main``, the
+        path a cloud's takes: its seq rules, stick and heartbeat timeouts, authority and cloud-control
+        checks; answers go out on ``drc/up``). An action: the sign-in session's CSRF token, as for the forms
+        (a stop also from a read-only console). Refused messages are answered to the page
+        (``drc_refused``), audited once per refused stream, never fed."""
+        method = ask.get("method")
+        pilot = page.pilot
+        stop = method == actions.STOP
+        headers = {**request.headers, CSRF_HEADER: str(ask.get("csrf") or "")}
+        denied = self._guard().may_act(headers, request.cookies, request.remote or "?", stop=stop)
+        if denied is None and (
+            method not in actions.PAGE_DRC or set(ask) - {"type", "csrf", "method", "data"}
+        ):
+            denied = Denied(400, f"expected {{type: drc, csrf, method: {'|'.join(actions.PAGE_DRC)}, data}}")
+        data = ask.get("data", {})
+        if denied is None and not isinstance(data, dict):
+            denied = Denied(400, "data: an object")
+        if denied is not None:
+            if not pilot.refused:  # once per refused stream: ten sticks a second are one line
+                audit("console_drc", who=str(page.who), method=str(method)[:32], result="refused",
+                      status=denied.status, reason=denied.reason)  # fmt: skip
+            pilot.refused = True
+            page.offer(_dumps({"type": "drc_refused", "method": str(method)[:32], "reason": denied.reason}))
+            return
+        assert isinstance(method, str) and isinstance(data, dict)
+        if stop:
+            audit("console_drc", who=str(page.who), method=method, result="sent")
+            self.state.journal.note("emergency_stop", method, who=str(page.who), source="page DRC")
+        elif not pilot.flying:
+            audit("console_drc", who=str(page.who), method=method, result="piloting")
+            self.state.journal.note("action", "drc from the page", who=str(page.who))
+        pilot.refused = False
+        self._down(pilot.message(method, data))
+
+    def _down(self, payload: bytes) -> None:
+        drc = getattr(self.app, "drc", None)
+        if drc is not None:
+            drc.inline_main(drc.down_topic, payload)
 
     async def _pump(self) -> None:
         """Once per tick while pages are open: gather on the gateway's loop, offer to every page."""

@@ -112,6 +112,8 @@ class ConsoleState:
                 "started": bool(app.started.is_set()),
                 "brokers": self._brokers(),
                 "requests_in_flight": int(getattr(app.dispatcher, "in_flight", 0) or 0),
+                # another gateway publishing under this serial number (gateway/twins.py)
+                "sn_conflict": app.twins.snapshot(now) if hasattr(app, "twins") else None,
             },
             "devices": devices,
             "drc": self._drc(drc),

@@ -4,11 +4,25 @@
 import { $, h, clear, toast } from "./dom.js";
 import { send } from "./api.js";
 import { build } from "./forms.js";
+import { describe } from "./moves.js";
 
 let catalog = null;
 let reader = null;
 let allowed = false;
 let current = null; // {sn, method}
+let latest = null; // the newest state push (the confirmation says how far from where a device is)
+
+export function setState(state) {
+  latest = state;
+}
+
+function osdOf(sn) {
+  const device = latest && latest.devices ? latest.devices.find((d) => d.sn === sn) : null;
+  if (device && device.osd) return device.osd;
+  // the gateway's own methods (drc_mode_enter …): the aircraft's position
+  const aircraft = latest && latest.devices ? latest.devices.find((d) => d.osd && typeof d.osd.latitude === "number") : null;
+  return aircraft ? aircraft.osd : null;
+}
 
 function entries() {
   if (!catalog) return [];
@@ -57,7 +71,7 @@ function showForm() {
   reader = build($("#action-form"), method.schema, entry.prefill);
 }
 
-function ask(text) {
+export function ask(text) {
   const dialog = $("#confirm");
   $("#confirm-text").textContent = text;
   return new Promise((resolve) => {
@@ -74,7 +88,7 @@ async function submit() {
     return;
   }
   const method = current.method;
-  if (method.moves && !(await ask(`${method.method} on ${current.sn} moves the device. Send it?\n${JSON.stringify(value)}`))) {
+  if (method.moves && !(await ask(`${describe(method.method, current.sn, value, osdOf(current.sn))} Send it?\n${JSON.stringify(value)}`))) {
     $("#action-result").textContent = "cancelled";
     return;
   }

@@ -12,6 +12,11 @@ export function setCsrf(value) {
   csrf = value;
 }
 
+/** The sign-in session's CSRF token (live control sends it with each WebSocket message). */
+export function csrfToken() {
+  return csrf;
+}
+
 async function parse(response) {
   let body = null;
   try {

@@ -9,8 +9,35 @@ import * as frames from "./frames.js";
 import * as journal from "./journal.js";
 import * as actions from "./actions.js";
 import * as cloudControl from "./cloudcontrol.js";
+import * as pilot from "./pilot.js";
 
-const ctx = { session: null, catalog: null, ws: null, state: null, retry: 500, drawing: false };
+const ctx = { session: null, catalog: null, ws: null, state: null, retry: 500, drawing: false, heard: 0 };
+//: the gateway pushes a state at least once a second (console.push_hz ≥ 1): none for this long and the
+//: page is marked as showing old data (greyed) until the next one
+const SILENT_MS = 2000;
+
+/** The whole page greys, saying since when, while the gateway is not heard (stale is never shown as live). */
+function markGone(why) {
+  if (document.body.classList.contains("gone")) return;
+  document.body.classList.add("gone");
+  const since = ctx.heard ? new Date(ctx.heard).toLocaleTimeString([], { hour12: false }) : "the start";
+  const banner = $("#gone");
+  banner.textContent = `${why}: everything below is as of ${since}, not live`;
+  banner.hidden = false;
+  devices.markUnknown();
+}
+
+function markLive() {
+  if (!document.body.classList.contains("gone")) return;
+  document.body.classList.remove("gone");
+  $("#gone").hidden = true;
+}
+
+setInterval(() => {
+  if (ctx.ws && ctx.ws.readyState === 1 && ctx.heard && Date.now() - ctx.heard > SILENT_MS) {
+    markGone("no news from the gateway for more than 2 s");
+  }
+}, 250);
 
 function showSession() {
   const s = ctx.session || {};
@@ -42,6 +69,7 @@ async function loadCatalog() {
   actions.setCatalog(ctx.catalog);
   map.configure(ctx.catalog.config);
   frames.configure(ctx.catalog.config, (message) => ctx.ws && ctx.ws.readyState === 1 && ctx.ws.send(JSON.stringify(message)));
+  pilot.configure(ctx.catalog, () => ctx.ws, actions.ask);
   try {
     map.setTracks(await get("/api/tracks"));
   } catch {
@@ -54,9 +82,11 @@ function draw() {
   ctx.drawing = false;
   const msg = ctx.state;
   devices.render(msg);
+  actions.setState(msg);
   map.render(msg);
   instruments.render(msg);
   drc.render(msg.drc);
+  pilot.render(msg.drc);
   cloudControl.render(msg.cloud_control);
   frames.links(msg.devices);
 }
@@ -75,6 +105,8 @@ function connect() {
   ws.onmessage = (event) => {
     const msg = JSON.parse(event.data);
     if (msg.type === "state") {
+      ctx.heard = Date.now();
+      markLive();
       // draw at most once per frame, the newest state (pushes may come faster than a busy page draws)
       const first = !ctx.state;
       ctx.state = msg;
@@ -91,14 +123,30 @@ function connect() {
       journal.add(msg.entries);
     } else if (msg.type === "frames") {
       frames.add(msg);
+    } else if (msg.type === "drc_refused") {
+      pilot.refused(msg);
     }
   };
   ws.onclose = () => {
+    pilot.connectionLost();
+    markGone("the connection to the gateway is lost");
     pill.textContent = "disconnected";
     pill.className = "pill off";
     ctx.retry = Math.min(ctx.retry * 2, 8000);
     setTimeout(start, ctx.retry);
   };
+}
+
+/** A new WebSocket for a new sign-in state: the gateway reads who a page is from its WebSocket's request
+ * (the session cookie), so live control needs one opened after signing in. */
+function renew() {
+  const old = ctx.ws;
+  if (old) {
+    old.onclose = null;
+    old.close();
+  }
+  pilot.connectionLost();
+  connect();
 }
 
 async function start() {
@@ -108,6 +156,7 @@ async function start() {
     connect();
   } catch (err) {
     $("#link-state").textContent = "gateway unreachable";
+    if (ctx.heard) markGone("the gateway is unreachable");
     ctx.retry = Math.min(ctx.retry * 2, 8000);
     setTimeout(start, ctx.retry);
   }
@@ -123,6 +172,7 @@ $("#signin").addEventListener("submit", async (event) => {
     await refreshSession();
     toast("signed in");
     if (!ctx.catalog && (await loadCatalog()) && !ctx.ws) connect();
+    else renew();
   } catch (err) {
     toast(`sign-in refused: ${err.message}`, true);
   }
@@ -132,6 +182,7 @@ $("#signout").addEventListener("click", async () => {
   await send("DELETE", "/api/session");
   setCsrf(null);
   await refreshSession();
+  renew();
 });
 
 $("#estop").addEventListener("click", async () => {
@@ -148,4 +199,5 @@ $("#estop").addEventListener("click", async () => {
 
 actions.init({ refreshSession });
 cloudControl.init();
+pilot.init();
 start();

@@ -5,9 +5,34 @@ const rows = new Map();
 const drawn = new Map(); // sn -> what the row shows (redrawn only when it changes)
 let brokersDrawn = "";
 
+//: data older than this is shown as stale, older than OFFLINE_S as offline (whatever the adapter's flag
+//: says): the simulated and real devices push several times a second, a quiet link is news
+export const STALE_S = 3;
+export const OFFLINE_S = 10;
+
+export function freshness(device) {
+  if (!device.online) return "offline";
+  const age = device.last_heard_s;
+  if (age === null || age === undefined) return "stale";
+  return age > OFFLINE_S ? "offline" : age > STALE_S ? "stale" : "live";
+}
+
+/** The gateway is not heard: nothing the rows say is known to be current. */
+export function markUnknown() {
+  for (const row of rows.values()) {
+    row.dataset.fresh = "unknown";
+    const cell = row.children[3];
+    if (cell) cell.replaceChildren(h("span", { class: "dot unknown" }), "unknown (gateway not heard)");
+  }
+  drawn.clear();
+}
+
 function cells(device) {
   const link = device.link || {};
-  const online = h("td", {}, h("span", { class: device.online ? "dot on" : "dot" }), device.online ? "online" : "offline");
+  const fresh = freshness(device);
+  const label = fresh === "live" ? "online" : fresh === "stale" ? `stale (${fmt(device.last_heard_s)} s)` : "offline";
+  const online = h("td", { title: `stale after ${STALE_S} s without data, offline after ${OFFLINE_S} s` },
+    h("span", { class: `dot ${fresh === "live" ? "on" : fresh}` }), label);
   const authority = device.authority.holder
     ? [device.authority.flight ? "flight" : null, device.authority.payload ? "payload" : null].filter(Boolean).join(" + ") + " (A)"
     : "—";
@@ -41,6 +66,7 @@ export function render(state) {
     if (drawn.get(device.sn) === key) continue;
     drawn.set(device.sn, key);
     row.dataset.online = String(device.online);
+    row.dataset.fresh = freshness(device);
     row.replaceChildren(...cells(device));
   }
   for (const [sn, row] of rows) {
@@ -50,10 +76,17 @@ export function render(state) {
       drawn.delete(sn);
     }
   }
-  const key = JSON.stringify([state.gateway.brokers, Math.round(state.gateway.uptime_s), state.gateway.requests_in_flight]);
+  const twin = state.gateway.sn_conflict || null;
+  const key = JSON.stringify([state.gateway.brokers, Math.round(state.gateway.uptime_s), state.gateway.requests_in_flight, twin]);
   if (key === brokersDrawn) return;
   brokersDrawn = key;
   const brokers = clear($("#brokers"));
+  if (twin && twin.count) {
+    // two gateways with one serial number on one broker: never shown as one (gateway/twins.py)
+    brokers.append(h("span", { class: "pill off", id: "sn-conflict", "data-active": String(twin.active),
+      title: "an osd under this gateway's serial number that it did not send: another gateway uses the same gateway_sn" },
+      `ANOTHER GATEWAY publishes as ${state.gateway.sn} on this broker (${twin.active ? "now" : `last ${fmt(twin.last_age_s)} s ago`}, ${twin.count} osd): give each its own gateway_sn`));
+  }
   for (const b of state.gateway.brokers) {
     brokers.append(
       h("span", { class: b.connected ? "pill on" : "pill off", "data-broker": b.name },

@@ -15,7 +15,8 @@ function facts(d) {
     ["last sticks", `fwd ${fmt(sp.forward, 2)} right ${fmt(sp.right, 2)} up ${fmt(sp.up, 2)} yaw ${fmt(sp.yaw_rate, 1)}°/s`],
     ["stick age / seq", `${d.stick_age_s == null ? "—" : `${fmt(d.stick_age_s, 2)} s`} · seq ${fmt(d.last_seq)}`],
     ["streaming", d.streaming ? "yes" : "no"],
-    ["failsafe", d.failsafe_reason ? `${d.failsafe_reason} at ${time(d.failsafe_at)}` : "none"],
+    ["failsafe now", d.hold ? `${d.hold}${d.failsafe_reason ? ` (${d.failsafe_reason} at ${time(d.failsafe_at)})` : ""}` : "none holds"],
+    ["failsafe history", history.length ? history.slice(-5).reverse().map((f) => `${f.reason} at ${time(f.at)}`).join(" · ") : "none since the page opened"],
     ["command delay", `${fmt(d.command_delay_ms)} ms`],
   ];
 }
@@ -63,9 +64,16 @@ function chart(beats) {
 }
 
 let drawn = "";
+//: the failsafes seen while the page is open (the one that holds now is shown apart)
+const history = [];
 
 export function render(d) {
   if (!d) return;
+  const last = history[history.length - 1];
+  if (d.failsafe_reason && d.failsafe_at && !(last && last.reason === d.failsafe_reason && last.at === d.failsafe_at)) {
+    history.push({ reason: d.failsafe_reason, at: d.failsafe_at });
+    if (history.length > 50) history.shift();
+  }
   const key = JSON.stringify(d);
   if (key === drawn) return;
   drawn = key;
@@ -74,5 +82,7 @@ export function render(d) {
   dl.dataset.state = String(d.state);
   dl.dataset.heartbeats = String((d.heartbeats || []).length);
   dl.dataset.failsafe = d.failsafe_reason || "";
+  dl.dataset.hold = d.hold || "";
+  dl.dataset.history = String(history.length);
   chart(d.heartbeats || []);
 }

@@ -5,7 +5,22 @@ import { $, h, s, clear, fmt } from "./dom.js";
 const cards = new Map();
 const drawn = new Map(); // sn -> the osd the card shows
 
-function dial(label, value, { min = -180, max = 180, full = true } = {}) {
+//: DJI Cloud API osd mode_code (aircraft): the names shown, the number in the tooltip
+const MODES = {
+  0: "standby", 1: "take-off preparation", 2: "take-off ready", 3: "manual flight", 4: "automatic take-off",
+  5: "wayline flight", 6: "panoramic photo", 7: "intelligent tracking", 8: "ADS-B avoidance",
+  9: "automatic return home", 10: "automatic landing", 11: "forced landing", 12: "three-propeller landing",
+  13: "upgrading", 14: "not connected", 15: "APAS", 16: "virtual stick", 17: "live flight control",
+  18: "airborne RTK fixing", 19: "dock address selecting",
+};
+
+export function modeName(code) {
+  return typeof code === "number" ? MODES[code] || `mode ${code}` : "—";
+}
+
+// compass dials (north up) say N/E/S/W; a dial of an angle relative to something (a gimbal's yaw against its
+// base) says 0°/90°/180°/−90° and "relative" in its value line
+function dial(label, value, { min = -180, max = 180, full = true, relative = false } = {}) {
   const svg = s("svg", { viewBox: "0 0 130 130", class: "dial-svg", "data-label": label });
   const c = 65;
   const r = 52;
@@ -17,15 +32,17 @@ function dial(label, value, { min = -180, max = 180, full = true } = {}) {
     const a = ((angleOf(m) - 90) * Math.PI) / 180;
     svg.append(s("line", { x1: c + Math.cos(a) * (r - 8), y1: c + Math.sin(a) * (r - 8), x2: c + Math.cos(a) * r, y2: c + Math.sin(a) * r, class: "tick" }));
   }
-  if (full) for (const [t, a] of [["N", 0], ["E", 90], ["S", 180], ["W", 270]]) {
+  const names = relative ? [["0", 0], ["90", 90], ["180", 180], ["−90", 270]] : [["N", 0], ["E", 90], ["S", 180], ["W", 270]];
+  if (full) for (const [t, a] of names) {
     const rad = ((a - 90) * Math.PI) / 180;
-    svg.append(s("text", { x: c + Math.cos(rad) * (r - 16) - 3, y: c + Math.sin(rad) * (r - 16) + 4, text: t }));
+    svg.append(s("text", { x: c + Math.cos(rad) * (r - 16) - 3 * t.length, y: c + Math.sin(rad) * (r - 16) + 4, text: t }));
   }
   if (typeof value === "number") {
     const a = ((angleOf(Math.max(min, Math.min(max, value))) - 90) * Math.PI) / 180;
     svg.append(s("line", { x1: c, y1: c, x2: c + Math.cos(a) * (r - 10), y2: c + Math.sin(a) * (r - 10), class: "needle" }));
   }
-  svg.append(s("text", { x: c, y: c + 26, "text-anchor": "middle", class: "value", text: `${label} ${fmt(value)}°` }));
+  svg.append(s("text", { x: c, y: c + 26, "text-anchor": "middle", class: "value", text: `${label} ${fmt(value)}°${relative ? " rel." : ""}` }));
+  if (relative) svg.dataset.relative = "true";
   void span;
   return svg;
 }
@@ -60,9 +77,10 @@ function bar(fraction, label) {
 function gimbalCard(d) {
   const o = d.osd;
   const card = h("div", { class: "instrument gimbal", "data-sn": d.sn, "data-yaw": fmt(o.gimbal_yaw, 2), "data-pitch": fmt(o.gimbal_pitch, 2), "data-roll": fmt(o.gimbal_roll, 2) },
-    h("h3", {}, `${d.sn} gimbal${d.payload_index ? ` (${d.payload_index})` : ""}`),
+    h("h3", {}, `${d.sn} gimbal${d.payload_index ? ` (${d.payload_index})` : ""}`,
+      h("small", {}, " · yaw relative to the gimbal's base, pitch and roll to the horizon")),
     h("div", { class: "row" },
-      dial("yaw", o.gimbal_yaw),
+      dial("yaw", o.gimbal_yaw, { relative: true }),
       dial("pitch", o.gimbal_pitch, { min: -90, max: 90, full: false }),
       horizon(0, o.gimbal_roll, "roll")));
   return card;
@@ -83,7 +101,7 @@ function aircraftCard(d) {
           ["horizontal", `${fmt(o.horizontal_speed)} m/s`],
           ["vertical", `${fmt(o.vertical_speed)} m/s`],
           ["position", `${fmt(o.latitude, 6)}, ${fmt(o.longitude, 6)}`],
-          ["mode_code", fmt(o.mode_code)],
+          ["mode", h("span", { title: `mode_code ${fmt(o.mode_code)}`, "data-mode-code": fmt(o.mode_code) }, modeName(o.mode_code))],
         ]),
         bar((battery.capacity_percent ?? 0) / 100, `battery ${fmt(battery.capacity_percent)} %`))));
 }
