@@ -42,6 +42,7 @@ class Resume:
     fresh_telemetry: float  # first osd produced after it (s)
     services: float  # first reply (s)
     buffered_delivered: int  # osd produced during the outage and delivered after it
+    cloud_sessions_lost: int = 0  # the cloud's reconnects to a broker that had forgotten its session
 
 
 class _Cloud:
@@ -57,12 +58,18 @@ class _Cloud:
             CallbackAPIVersion.VERSION2, client_id=f"resume-{uuid.uuid4().hex[:6]}", clean_session=False
         )
         self.client.reconnect_delay_set(0.02, 0.02)
-        self.client.on_connect = lambda c, u, f, rc, p: c.subscribe(
-            [("thing/product/+/osd", 0), (f"thing/product/{GW}/services_reply", 1)]
-        )
+        self.connects = 0
+        self.sessions_lost = 0  # reconnects whose broker had forgotten this session (nothing queued for it)
+        self.client.on_connect = self._on_connect
         self.client.on_message = self._on_message
         self.client.connect("127.0.0.1", port)
         self.client.loop_start()
+
+    def _on_connect(self, client: Any, userdata: Any, flags: Any, rc: Any, props: Any) -> None:
+        if self.connects and not flags.session_present:
+            self.sessions_lost += 1
+        self.connects += 1
+        client.subscribe([("thing/product/+/osd", 0), (f"thing/product/{GW}/services_reply", 1)])
 
     def _on_message(self, client: Any, userdata: Any, msg: paho.MQTTMessage) -> None:
         now = time.monotonic()
@@ -115,7 +122,8 @@ def measure(outages: list[float], settle: float = 2.0) -> list[Resume]:
         while not cloud.osd and time.monotonic() < deadline:
             time.sleep(0.05)
         for outage in outages:
-            time.sleep(max(settle, 1.2))  # (mosquitto's autosave has the cloud's session on disk)
+            time.sleep(settle)
+            broker.save()  # the cloud's session on disk before the crash (autosave's timing varies)
             broker.stop(kill=True)
             down = time.monotonic()
             down_wall = time.time()
@@ -162,6 +170,7 @@ def measure(outages: list[float], settle: float = 2.0) -> list[Resume]:
                     fresh_telemetry=(min(fresh) - back) if fresh else float("nan"),
                     services=answered - back,
                     buffered_delivered=late,
+                    cloud_sessions_lost=cloud.sessions_lost,
                 )
             )
     finally:

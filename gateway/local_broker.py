@@ -175,6 +175,22 @@ class LocalBroker:
         self.stop()
         raise TimeoutError(f"mosquitto did not listen on {self.host}:{self.port} within {timeout}s")
 
+    def save(self, timeout: float = 5.0) -> None:
+        """Have mosquitto write its persistence database now (SIGUSR1) and wait until the file changed: what a
+        test's crash (``stop(kill=True)``) must not lose, whatever the autosave's timing under load."""
+        db = self._dir / "mosquitto.db"
+        if self._proc is None or self._proc.poll() is not None:
+            return
+        before = db.stat().st_mtime_ns if db.exists() else 0
+        self._proc.send_signal(signal.SIGUSR1)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if db.exists() and db.stat().st_mtime_ns != before:
+                time.sleep(0.05)  # written, not half-written
+                return
+            time.sleep(0.02)
+        raise TimeoutError(f"mosquitto did not write {db} within {timeout}s (persistence off?)")
+
     def stop(self, *, kill: bool = False) -> None:
         """Stop the broker; ``kill`` sends SIGKILL (a crash) instead of SIGTERM."""
         if self._proc is None:
