@@ -376,7 +376,7 @@ def run(cfg: Config) -> list[Row]:
             Row(group="cellular", case="skipped: no network namespaces here", count=0, rate=0.0, unit="-")
         ]
     rows: list[Row] = []
-    n = 30 if cfg.quick else 300
+    n = 15 if cfg.quick else 300
     with Rig(how, LTE) as rig:
         s = measure_services(rig, n)
     share = 100.0 * s.ok / s.sent

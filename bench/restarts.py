@@ -130,7 +130,7 @@ class _Cloud:
 
 
 def run(cfg: Config) -> list[Row]:
-    kills = 3 if cfg.quick else 30
+    kills = 2 if cfg.quick else 30
     broker = LocalBroker(persistence=True).start()
     gw = subprocess.Popen(
         [sys.executable, "-m", "gateway.cli", "run", "--simulate", "--broker", broker.url, "--gateway-sn", GW,

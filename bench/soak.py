@@ -1,5 +1,5 @@
 """A bounded soak of live flight control: DRC at 20 Hz sticks and 1 Hz heartbeats against the gateway
-with a simulated gimbal under ``drc_drive``, for 5 minutes (quick: 8 s; ``DJIGW_SOAK_SECONDS`` sets
+with a simulated gimbal under ``drc_drive``, for 5 minutes (quick: 4 s; ``DJIGW_SOAK_SECONDS`` sets
 another length, e.g. 3600 for an hour: the whole ``make bench`` stays under 15 minutes with the default).
 
 Counts every heartbeat echo that did not come back (must be 0), the failsafe stops (must be 0: sticks and
@@ -37,7 +37,7 @@ def _rss_mb() -> float:
 
 
 def run(cfg: Config) -> list[Row]:
-    seconds = 8.0 if cfg.quick else float(os.environ.get("DJIGW_SOAK_SECONDS", "300"))
+    seconds = 4.0 if cfg.quick else float(os.environ.get("DJIGW_SOAK_SECONDS", "300"))
     with LocalBroker() as broker:
         channel = f"soak-{uuid.uuid4().hex[:6]}"
         sim = GimbalCanSim(interface="virtual", channel=channel).start()
