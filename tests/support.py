@@ -279,7 +279,9 @@ class BusSniffer:
         self.bus = can.Bus(interface="virtual", channel=channel)
         self.rx = Reassembler(rx_id=HOST_TX_ID)
         self.commands: list[tuple[str, dict[str, Any]]] = []
-        self.times: list[float] = []  # time.monotonic() when each command was heard
+        #: when each command was sent, on time.monotonic()'s scale: the virtual bus stamps a frame with
+        #: time.time() as it is sent, so a sniffer thread that runs late (a loaded machine) dates it right
+        self.times: list[float] = []
         self.cmd_types: list[int] = []  # each command's CmdType reply type (0: no reply wanted)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -293,7 +295,7 @@ class BusSniffer:
             for item in self.rx.feed(msg.arbitration_id, bytes(msg.data)):
                 if isinstance(item, Frame) and not item.is_reply:
                     m = decode_message(item)
-                    self.times.append(time.monotonic())
+                    self.times.append(time.monotonic() - (time.time() - msg.timestamp))
                     self.cmd_types.append(item.cmd_type)
                     self.commands.append((m.name, m.fields))
 

@@ -163,10 +163,15 @@ def test_enter_sticks_heartbeats_seq_rules_and_exit(
 
         # sticks stop: the set-point is zeroed within stick_timeout (0.5 s) plus a stream period
         wait_until(lambda: model.yaw.speed == 0.0, 3, what="zero speed after sticks stop")
-        first_zero = next(
-            t for t, (n, f) in zip(sniffer.times, sniffer.commands, strict=False)
-            if t > last_stick and n == "speed_control" and f["yaw_speed"] == 0
-        )  # fmt: skip
+
+        def zeros() -> list[float]:  # the sniffer hears the bus on its own thread: it may lag the gimbal
+            return [
+                t for t, (n, f) in zip(list(sniffer.times), list(sniffer.commands), strict=False)
+                if t > last_stick and n == "speed_control" and f["yaw_speed"] == 0
+            ]  # fmt: skip
+
+        wait_until(lambda: bool(zeros()), 3, what="the zeroing speed_control heard on the bus")
+        first_zero = zeros()[0]
         assert first_zero - last_stick < 0.5 + 0.04 + 0.35  # deadline + one period + scheduling margin
 
         # exit: motion already stopped, drc_state back to 0

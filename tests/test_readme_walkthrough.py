@@ -169,6 +169,7 @@ def _collect(proc: subprocess.Popen[str]) -> list[str]:
 
 @pytest.mark.broker
 @pytest.mark.slow
+@pytest.mark.timeout(240)  # some 40 fresh processes in a row: 45-60 s alone, twice that beside the suite
 def test_every_readme_command_block_runs_as_a_reader_would() -> None:
     find_mosquitto()  # `make run` starts it
     port, metrics_port = free_port(), free_port()
