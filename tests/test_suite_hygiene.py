@@ -30,8 +30,12 @@ def test_the_ci_profile_is_reproducible() -> None:
 
 def test_make_test_runs_the_suite_in_parallel() -> None:
     makefile = (ROOT / "Makefile").read_text()
-    recipe = re.search(r"^test:.*\n\t(.+)$", makefile, re.MULTILINE)
-    assert recipe is not None and "-n $(TEST_WORKERS)" in recipe.group(1)
+    recipe = re.search(r"^test:.*\n((?:\t.+\n)+)", makefile, re.MULTILINE)
+    assert recipe is not None
+    lines = recipe.group(1).splitlines()
+    # the last line runs the suite in parallel, with the bytecode cache on (the lines before fill it)
+    assert "-m pytest" in lines[-1] and "-n $(TEST_WORKERS)" in lines[-1], lines
+    assert all(line.startswith("\tPYTHONDONTWRITEBYTECODE= ") for line in lines), lines
     workers = re.search(r"^TEST_WORKERS \?= (\d+)$", makefile, re.MULTILINE)
     assert workers is not None and int(workers.group(1)) >= 2
 
