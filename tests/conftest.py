@@ -82,16 +82,27 @@ SHARED_FIXTURE_MODULES = frozenset(
         "test_video.py",
     }
 )
-#: Long tests not marked ``slow`` (none now: mark a long test ``slow`` instead). An ordering hint only.
-LONG_UNMARKED: tuple[str, ...] = ()
+#: The longest tests (40-75 s alone on 2 cores, 2026-11-28): they start before the other long ones, so
+#: the run does not end on one of them started late (a run ends when its last long test does). An ordering
+#: hint only; tests/test_suite_hygiene.py checks each still names a test.
+LONGEST: tuple[str, ...] = (
+    "tests/test_restart_truth.py::test_killed_mid_return_home_the_restart_reports_it_and_can_cancel_it",
+    "tests/test_return_home_e2e.py::test_return_home_lands_at_home_from[200m_away]",
+    "tests/test_drc_session.py::TestDrcSession",
+    "tests/test_readme_walkthrough.py::test_every_readme_command_block_runs_as_a_reader_would",
+    "tests/test_wayline_cli.py::test_fly_a_route_from_the_console",
+    "tests/test_console_browser.py::test_the_map_draws_a_wayline_task_and_its_progress",
+    "tests/test_fuzz_atheris.py::test_atheris_target[drc]",
+)
 _FIRST = ("slow", "nats", "atheris", "browser")
 
 
 def _rank(item: pytest.Item) -> int:
-    """0: long (marked slow, a NATS cluster, a fuzzer, a browser); 1: waits on a real broker; 2: the rest."""
-    if (LONG_UNMARKED and item.nodeid.startswith(LONG_UNMARKED)) or any(
-        item.get_closest_marker(m) for m in _FIRST
-    ):
+    """-1: :data:`LONGEST`; 0: long (marked slow, a NATS cluster, a fuzzer, a browser); 1: waits on a real
+    broker; 2: the rest."""
+    if item.nodeid.startswith(LONGEST):
+        return -1
+    if any(item.get_closest_marker(m) for m in _FIRST):
         return 0
     fixtures = getattr(item, "fixturenames", ())
     if item.get_closest_marker("broker") or "broker" in fixtures or "private_broker" in fixtures:

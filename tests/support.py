@@ -125,11 +125,21 @@ class CloudClient:
             payload = json.dumps(payload)
         self.client.publish(topic, payload, qos=qos).wait_for_publish(5)
 
+    def mark(self) -> int:
+        """A point in what has been received: ``find(..., since=mark)`` sees only what came after it
+        (unlike :meth:`clear`, which also forgets what other waits still look for). A clear voids marks."""
+        with self._lock:
+            return len(self.messages)
+
     def find(
-        self, suffix: str, predicate: Callable[[dict[str, Any]], bool] = lambda b: True
+        self, suffix: str, predicate: Callable[[dict[str, Any]], bool] = lambda b: True, since: int = 0
     ) -> list[dict[str, Any]]:
         with self._lock:
-            return [b for t, b, _ in self.messages if t.endswith(suffix) and b is not None and predicate(b)]
+            return [
+                b
+                for t, b, _ in self.messages[since:]
+                if t.endswith(suffix) and b is not None and predicate(b)
+            ]
 
     def wait_for(
         self,

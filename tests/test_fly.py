@@ -161,6 +161,10 @@ def _position(cloud: CloudClient) -> dict[str, Any]:
     return cloud.wait_for(f"{AIRCRAFT}/osd", timeout=5)[-1]["data"]
 
 
+def _has_speed(body: dict[str, Any]) -> bool:
+    return "horizontal_speed" in body.get("data", {})
+
+
 def _fly(env: dict[str, str]) -> Pty:
     term = Pty([sys.executable, "-m", "gateway.cli", "fly", "--gateway-sn", GW], env)
     wait_until(lambda: "in live control of" in term.text() or term.proc.poll() is not None, 20, what="fly")
@@ -192,9 +196,12 @@ def test_fly_moves_the_aircraft_while_a_key_is_held_and_stops_it_on_quit(
         # a stream (10 Hz and 1 Hz for 3 s; a late tick is skipped, never made up in a burst)
         assert 10 <= len(sticks) <= 45 and 1 <= len(hearts) <= 5
         assert any(s["data"]["y"] == 2.0 for s in sticks)
+        # flying while the key was held (read from the osd of the hold: on a loaded machine the next osd
+        # may come after the release, when the aircraft has braked)
+        speeds = [b["data"]["horizontal_speed"] for b in cloud.find(f"{AIRCRAFT}/osd", _has_speed)]
         moved = _position(cloud)
         assert _metres(start, moved) > 2.0, (start, moved)
-        assert moved["horizontal_speed"] > 0.5
+        assert max(speeds, default=0.0) > 0.5, speeds
         # the quit key: sticks zeroed, DRC left, the command exits 0 and says why
         cloud.clear()
         term.type(quit_key)

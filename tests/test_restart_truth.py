@@ -108,10 +108,13 @@ def _last_osd(rig: Rig) -> dict[str, Any]:
 
 
 def _fresh_osd(rig: Rig, predicate: Any, timeout: float, what: str) -> dict[str, Any]:
-    """Wait for an osd received from now on that satisfies ``predicate``."""
-    rig.cloud.clear()
+    """Wait for an osd received from now on that satisfies ``predicate`` (what came before is kept: an
+    event the gateway sent meanwhile is still there for the test to find)."""
+    since = rig.cloud.mark()
     found: dict[str, Any] = wait_until(
-        lambda: next((d for d in (b["data"] for b in rig.cloud.find(f"{SN}/osd")) if predicate(d)), None),
+        lambda: next(
+            (d for d in (b["data"] for b in rig.cloud.find(f"{SN}/osd", since=since)) if predicate(d)), None
+        ),
         timeout,
         what=what,
     )

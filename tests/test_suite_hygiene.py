@@ -7,6 +7,7 @@ import ast
 import re
 from pathlib import Path
 
+import pytest
 from hypothesis import settings
 
 from tests.test_drc_session import DrcSessionMachine
@@ -78,3 +79,21 @@ def test_the_parallel_scheduler_keeps_a_shared_fixture_module_together() -> None
     together = {shared_fixture_scope(f"tests/test_drc_interop.py::test_{n}") for n in ("a", "b[x]")}
     assert together == {"tests/test_drc_interop.py"}
     assert shared_fixture_scope("tests/test_outage.py::test_a") == "tests/test_outage.py::test_a"
+
+
+def test_every_longest_hint_names_a_test(request: pytest.FixtureRequest) -> None:
+    """conftest.LONGEST orders the run; a hint that names no test any more is a stale hint."""
+    from tests.conftest import LONGEST
+
+    session_ids = [item.nodeid for item in request.session.items]
+    if len(session_ids) < 100:  # run alone (-k, one file): collect the whole suite's ids
+        import subprocess
+        import sys
+
+        out = subprocess.run(
+            [sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider"],
+            cwd=ROOT, capture_output=True, text=True, timeout=120, check=True,
+        ).stdout  # fmt: skip
+        session_ids = [line for line in out.splitlines() if "::" in line]
+    for hint in LONGEST:
+        assert any(nodeid.startswith(hint) for nodeid in session_ids), hint
