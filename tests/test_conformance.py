@@ -85,6 +85,13 @@ class Sim:
         d = self.osd()
         return float(d["latitude"]), float(d["longitude"])
 
+    def track(self) -> list[tuple[float, float]]:
+        """Every position the osd has reported so far."""
+        return [
+            (float(b["data"]["latitude"]), float(b["data"]["longitude"]))
+            for b in self.cloud.find(f"{SN}/osd", lambda b: "latitude" in b["data"])
+        ]
+
     def elevation(self) -> float:
         return float(self.osd().get("elevation", 0.0))
 
@@ -160,12 +167,14 @@ def test_the_java_clouds_wayline_job_flies_to_ok_without_a_grab(sim: Sim) -> Non
             90,
             what="the job's progress ends ok",
         )
-        # it flew the route: it was at the last waypoint
+        # it flew the route: it was at the last waypoint (the osd of the flight, not the latest: the route's
+        # finish action may already have it on its way on, and a loaded machine reads late)
         statuses = [
             b["data"]["output"]["status"] for b in sim.events("flighttask_progress", "flight_id", job_id)
         ]
         assert "failed" not in statuses and statuses[-1] == "ok", statuses
-        assert _flat(sim.position(), points[-1]) < 5.0, (sim.position(), points[-1])
+        closest = min(_flat(p, points[-1]) for p in sim.track())
+        assert closest < 5.0, (closest, sim.position(), points[-1])
     finally:
         java.disconnect()
         java.loop_stop()
