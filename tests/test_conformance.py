@@ -173,8 +173,9 @@ def test_the_java_clouds_wayline_job_flies_to_ok_without_a_grab(sim: Sim) -> Non
             b["data"]["output"]["status"] for b in sim.events("flighttask_progress", "flight_id", job_id)
         ]
         assert "failed" not in statuses and statuses[-1] == "ok", statuses
-        closest = min(_flat(p, points[-1]) for p in sim.track())
-        assert closest < 5.0, (closest, sim.position(), points[-1])
+        # (the osd may lag the event on a loaded machine: a few seconds for it to show the aircraft there)
+        wait_until(lambda: min(_flat(p, points[-1]) for p in sim.track()) < 5.0, 5,
+                   what=f"the aircraft at the last waypoint {points[-1]}, not {sim.position()}")  # fmt: skip
     finally:
         java.disconnect()
         java.loop_stop()
@@ -206,7 +207,8 @@ def test_the_demo_webs_default_take_off_climbs_to_the_target(sim: Sim) -> None:
         60,
         what="the take-off's task_finish",
     )
-    assert _flat(sim.position(), target) < 3.0, (sim.position(), target)
+    # the osd that shows it there may come a moment after the event on a loaded machine
+    wait_until(lambda: _flat(sim.position(), target) < 3.0, 5, what=f"at {target}, not {sim.position()}")
     assert abs(sim.elevation() - 25.0) < 2.0, sim.elevation()
     failed = [b for b in sim.events("takeoff_to_point_progress", "flight_id", flight_id)
               if b["data"]["status"] in ("wayline_failed", "wayline_cancel")]  # fmt: skip

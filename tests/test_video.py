@@ -18,6 +18,10 @@ import pytest
 from gateway.cli.run import SIM_AIRCRAFT_SN
 from gateway.local_broker import LocalBroker
 from tests.support import wait_until
+
+# Waits for frames are generous (20-25 s): each is an encoder's start on a CPU the parallel suite shares
+# (ffmpeg's own start-up and first frames took 8-10 s under load). What the issue times (the first frame
+# within 5 s, the end within 2 s of a stop) keeps its own bound.
 from tests.video_rig import CAMERA, VIDEO, Listener, Receiver, Rig, free_port, probe
 
 pytestmark = [
@@ -118,14 +122,14 @@ def test_source_killed_mid_stream_restarts_and_status_shows_it(rig: Rig) -> None
     start = {"url_type": 1, "url": receivers[0].url, "video_id": CAMERA, "video_quality": 0}
     try:
         assert result(rig.cloud.service("live_start_push", start)) == 0
-        wait_until(lambda: receivers[0].frames >= 15, 8, what="the camera's frames (pass-through)")
+        wait_until(lambda: receivers[0].frames >= 15, 20, what="the camera's frames (pass-through)")
         wait_until(lambda: (1, 0) in rig.status(CAMERA), 5, what="live_status 1")
         rig.camera.kill()
-        wait_until(lambda: rig.status(CAMERA)[-1] == (0, 399015), 8, what="live_status failure")
+        wait_until(lambda: rig.status(CAMERA)[-1] == (0, 399015), 20, what="live_status failure")
         wait_until(lambda: receivers[-1].ended_at is not None, 5, what="the receiver's end")
         receivers.append(Receiver(port, rig.tmp / "camera-1.flv"))
         rig.camera.start()
-        wait_until(lambda: receivers[-1].frames >= 15, 10, what="frames after the restart")
+        wait_until(lambda: receivers[-1].frames >= 15, 20, what="frames after the restart")
         wait_until(lambda: rig.status(CAMERA)[-1] == (1, 0), 5, what="live_status recovered")
         history = rig.status(CAMERA)
         assert history[history.index((0, 399015)) :][-1] == (1, 0), history
@@ -183,14 +187,14 @@ def test_quality_and_lens_changes_replace_the_pipeline(rig: Rig) -> None:
     try:
         start = {"url_type": 1, "url": rtmp.url, "video_id": VIDEO, "video_quality": 0}
         assert result(rig.cloud.service("live_start_push", start)) == 0
-        wait_until(lambda: rtmp.receivers[0].frames >= 15, 8, what="frames at quality 0")
+        wait_until(lambda: rtmp.receivers[0].frames >= 15, 20, what="frames at quality 0")
         assert result(rig.cloud.service("live_set_quality", {"video_id": VIDEO, "video_quality": 1})) == 0
-        wait_until(lambda: any(rx.frames >= 15 for rx in rtmp.receivers[1:]), 15, what="frames at quality 1")
+        wait_until(lambda: any(rx.frames >= 15 for rx in rtmp.receivers[1:]), 25, what="frames at quality 1")
         smooth = next(rx for rx in rtmp.receivers[1:] if rx.frames >= 15)
         assert result(rig.cloud.service("live_lens_change", {"video_id": VIDEO, "video_type": "ir"})) == 0
         wait_until(
             lambda: (rig.entry(VIDEO) or {}).get("video_type") == "ir" and rig.entry(VIDEO)["status"] == 1,
-            10,
+            25,
             what="live_status: ir lens, streaming",
         )
         assert rig.entry(VIDEO)["video_quality"] == 1
@@ -211,10 +215,10 @@ def test_a_device_going_offline_stops_its_streams(rig: Rig) -> None:
     try:
         start = {"url_type": 1, "url": rx.url, "video_id": VIDEO}
         assert result(rig.cloud.service("live_start_push", start)) == 0
-        wait_until(lambda: rx.frames >= 15, 8, what="frames")
+        wait_until(lambda: rx.frames >= 15, 20, what="frames")
         for sim in rig.sims:
             sim.stop()  # silent for osdk.silence_timeout (2 s): offline
-        wait_until(lambda: rx.ended_at is not None, 8, what="the stream's end")
+        wait_until(lambda: rx.ended_at is not None, 15, what="the stream's end")
         wait_until(lambda: rig.status(VIDEO)[-1] == (0, 325012), 3, what="live_status: device not connected")
         assert result(rig.cloud.service("live_start_push", start)) == 325012
     finally:
