@@ -81,6 +81,11 @@ def rig(private_broker: LocalBroker) -> Iterator[dict[str, Any]]:
                 "enable_tls": False}  # fmt: skip
         r = cloud.service("drc_mode_enter", {"mqtt_broker": link, "osd_frequency": 10, "hsi_frequency": 2})
         assert r["data"]["result"] == 0
+        # live control is on once the gateway's own link to the DRC broker has subscribed (drc_state 2);
+        # a QoS 0 message sent before that reaches nobody (a loaded machine made the window seconds wide)
+        cloud.wait_for(
+            "events", lambda b: b["method"] == "drc_status_notify" and b["data"]["drc_state"] == 2, timeout=10
+        )
         drc = CloudClient(drc_broker.host, drc_broker.port, GW, username=DRC_USER, password=DRC_PASSWORD)
         yield {"fc": fc, "pty": pty, "cloud": cloud, "drc": drc, "gw": gw, "drc_broker": drc_broker}
         drc.close()

@@ -195,10 +195,12 @@ def test_drc_driven_only_by_stick_control_moves_the_aircraft_and_the_gimbal(sim:
     after = osd()
     speed = math.hypot(after["speed_x"], after["speed_y"])
     assert speed > 3.0, after  # 5 m/s asked for at half pitch
+    # 45 °/s for the window (3 s, longer when a loaded machine stretches the sleeps)
+    most = min(359.0, 45.0 * window + 45.0)
     turned = (after["attitude_head"] - before["attitude_head"]) % 360
-    assert 20 < turned < 180, (before["attitude_head"], after["attitude_head"])  # 45 °/s for ~3 s
+    assert 20 < turned < most, (before["attitude_head"], after["attitude_head"], window)
     gimbal = (after["gimbal_yaw"] - before["gimbal_yaw"]) % 360
-    assert 20 < gimbal < 180, (before["gimbal_yaw"], after["gimbal_yaw"])  # the gimbal yaws with yaw
+    assert 20 < gimbal <= most, (before["gimbal_yaw"], after["gimbal_yaw"], window)  # the gimbal yaws too
     assert "elevation" in after and abs(after["elevation"] - 20.0) < 3.0, after
     # accepted stick_control is not answered (DJI: "this protocol has no reply")
     assert not cloud.find("drc/up", lambda b: b["method"] == "stick_control")
