@@ -94,6 +94,15 @@ class Cloud:
         close_client(self.client)
 
 
+def _drop_probe(client: paho.Client) -> None:
+    """The end of a short-lived probe client, however its attempt went: disconnect (best effort: its node
+    may be dead or the connection never made), stop its network loop, release paho's sockets."""
+    with contextlib.suppress(Exception):
+        client.disconnect()
+    client.loop_stop()
+    close_client(client)
+
+
 class ClusterProbe:
     """When the cluster itself serves MQTT sessions again, measured without the gateway: on every
     surviving node, a new attempt every ``period`` s (up to ``timeout`` s each, so attempts overlap):
@@ -155,10 +164,7 @@ class ClusterProbe:
         except OSError:
             pass
         finally:
-            with contextlib.suppress(Exception):
-                client.disconnect()
-            client.loop_stop()
-            close_client(client)
+            _drop_probe(client)
 
     def wait(self, timeout: float) -> float | None:
         deadline = time.monotonic() + timeout
@@ -445,10 +451,7 @@ def _publish_once(host: str, ports: list[int], tid: str) -> float:
             except (OSError, RuntimeError, ValueError):
                 pass
             finally:
-                with contextlib.suppress(Exception):
-                    client.disconnect()
-                client.loop_stop()
-                close_client(client)
+                _drop_probe(client)
     raise AssertionError("no survivor took the fresh request")
 
 

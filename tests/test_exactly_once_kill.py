@@ -16,9 +16,7 @@ from __future__ import annotations
 import json
 import os
 import re
-import selectors
 import signal
-import socket
 import sys
 import threading
 import time
@@ -29,8 +27,8 @@ from typing import Any
 import pytest
 
 from gateway.local_broker import LocalBroker
+from tests.mqtt_proxy import PUBLISH, MqttProxy, packet_type
 from tests.support import CloudClient, Proc, wait_until
-from tests.test_liveness import PUBLISH, mqtt_packets
 
 pytestmark = [pytest.mark.broker, pytest.mark.slow]  # three processes: started first in make test
 
@@ -39,71 +37,31 @@ SN = "RSDK-KILL-ONCE-1"
 PI = "20-0-0"
 
 
-class CutProxy:
+class CutProxy(MqttProxy):
     """TCP proxy to ``upstream``. Once a PUBLISH holding ``marker`` has passed towards the client, every
     byte from the client towards the broker is dropped (``cut``); PUBLISH packets from the client that
     hold ``marker`` are noted meanwhile (``held``): the reply the broker never gets."""
 
     def __init__(self, upstream: tuple[str, int], marker: bytes) -> None:
-        self.upstream, self.marker = upstream, marker
+        self.marker = marker
         self.cut = threading.Event()
         self.held: list[bytes] = []
-        self._listener = socket.create_server(("127.0.0.1", 0))
-        self.port = self._listener.getsockname()[1]
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="cut-proxy", daemon=True)
-        self._thread.start()
+        super().__init__(upstream, to_server=self._to_server, to_client=self._to_client, name="cut-proxy")
 
-    def _run(self) -> None:
-        sel = selectors.DefaultSelector()
-        self._listener.setblocking(False)
-        sel.register(self._listener, selectors.EVENT_READ, None)
-        # sock -> (its peer, its buffer, True when sock is the client side)
-        pairs: dict[socket.socket, tuple[socket.socket, bytearray, bool]] = {}
-        while not self._stop.is_set():
-            for key, _ in sel.select(0.05):
-                sock = key.fileobj
-                assert isinstance(sock, socket.socket)
-                if sock is self._listener:
-                    client, _ = self._listener.accept()
-                    server = socket.create_connection(self.upstream, timeout=2)
-                    for s in (client, server):
-                        s.setblocking(True)
-                        sel.register(s, selectors.EVENT_READ, None)
-                    pairs[client] = (server, bytearray(), True)
-                    pairs[server] = (client, bytearray(), False)
-                    continue
-                peer, buf, from_client = pairs[sock]
-                try:
-                    data = sock.recv(65536)
-                except OSError:
-                    data = b""
-                if not data:
-                    for s in (sock, peer):
-                        sel.unregister(s)
-                        pairs.pop(s, None)
-                        s.close()
-                    continue
-                buf.extend(data)
-                try:
-                    for packet in mqtt_packets(buf):
-                        marked = packet[0] >> 4 == PUBLISH and self.marker in packet
-                        if from_client and self.cut.is_set():
-                            if marked:
-                                self.held.append(packet)
-                            continue
-                        peer.sendall(packet)
-                        if marked and not from_client:
-                            self.cut.set()  # the request went through to the gateway: cut its way back
-                except OSError:
-                    pass
-        for s in list(pairs):
-            s.close()
-        self._listener.close()
+    def _marked(self, packet: bytes) -> bool:
+        return packet_type(packet) == PUBLISH and self.marker in packet
 
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(2)
+    def _to_server(self, packet: bytes) -> bool:
+        if self.cut.is_set():
+            if self._marked(packet):
+                self.held.append(packet)
+            return False
+        return True
+
+    def _to_client(self, packet: bytes) -> bool:
+        if self._marked(packet):
+            self.cut.set()  # the request goes through to the gateway: cut its way back
+        return True
 
 
 def _photos(sim: Proc) -> int:

@@ -10,114 +10,38 @@ moves to the next broker url (mosquitto itself) and answers requests again, well
 from __future__ import annotations
 
 import json
-import selectors
-import socket
 import threading
 import time
 import urllib.error
 import urllib.request
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
 
 from adapters.rsdk.sim import GimbalCanSim
 from gateway.local_broker import LocalBroker
+from tests.mqtt_proxy import PUBLISH, MqttProxy, mqtt_packets, packet_type
 from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
 
 pytestmark = pytest.mark.broker
 
 GW = "GW-DEAF-1"
-PUBLISH = 3
 
 
-def mqtt_packets(buf: bytearray) -> Iterator[bytes]:
-    """Whole MQTT control packets at the front of ``buf`` (removed from it); a partial one stays."""
-    while len(buf) >= 2:
-        length, multiplier, i = 0, 1, 1
-        while True:
-            if i >= len(buf):
-                return
-            byte = buf[i]
-            length += (byte & 0x7F) * multiplier
-            multiplier *= 128
-            i += 1
-            if not byte & 0x80:
-                break
-        if len(buf) < i + length:
-            return
-        packet = bytes(buf[: i + length])
-        del buf[: i + length]
-        yield packet
-
-
-class DeafProxy:
-    """TCP proxy to ``upstream``; while ``deaf`` is set, PUBLISH packets to the client are dropped."""
+class DeafProxy(MqttProxy):
+    """TCP proxy to ``upstream``; while ``deaf`` is set, PUBLISH packets to the client are dropped
+    (counted in ``dropped``). What the client sends is passed as is."""
 
     def __init__(self, upstream: tuple[str, int]) -> None:
-        self.upstream = upstream
         self.deaf = threading.Event()
         self.dropped = 0
-        self._listener = socket.create_server(("127.0.0.1", 0))
-        self.port = self._listener.getsockname()[1]
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="deaf-proxy", daemon=True)
-        self._thread.start()
+        super().__init__(upstream, to_client=self._to_client, name="deaf-proxy")
 
-    def _run(self) -> None:
-        sel = selectors.DefaultSelector()
-        self._listener.setblocking(False)
-        sel.register(self._listener, selectors.EVENT_READ, None)
-        pairs: dict[socket.socket, tuple[socket.socket, bytearray | None]] = {}
-        while not self._stop.is_set():
-            for key, _ in sel.select(0.05):
-                sock = key.fileobj
-                assert isinstance(sock, socket.socket)
-                if sock is self._listener:
-                    client, _ = self._listener.accept()
-                    try:
-                        server = socket.create_connection(self.upstream, timeout=2)
-                    except OSError:
-                        client.close()
-                        continue
-                    for s in (client, server):
-                        s.setblocking(True)
-                        s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                        sel.register(s, selectors.EVENT_READ, None)
-                    pairs[client] = (server, None)  # client -> broker: passed as is
-                    pairs[server] = (client, bytearray())  # broker -> client: parsed, PUBLISH maybe dropped
-                    continue
-                peer, buf = pairs[sock]
-                try:
-                    data = sock.recv(65536)
-                except OSError:
-                    data = b""
-                if not data:
-                    for s in (sock, peer):
-                        sel.unregister(s)
-                        pairs.pop(s, None)
-                        s.close()
-                    continue
-                try:
-                    if buf is None:
-                        peer.sendall(data)
-                        continue
-                    buf.extend(data)
-                    for packet in mqtt_packets(buf):
-                        if packet[0] >> 4 == PUBLISH and self.deaf.is_set():
-                            self.dropped += 1
-                            continue
-                        peer.sendall(packet)
-                except OSError:
-                    pass
-        for s in list(pairs):
-            s.close()
-        self._listener.close()
-        sel.close()
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(5)
+    def _to_client(self, packet: bytes) -> bool:
+        if packet_type(packet) == PUBLISH and self.deaf.is_set():
+            self.dropped += 1
+            return False
+        return True
 
 
 def test_the_proxy_parses_packets_split_anywhere() -> None:

@@ -1,29 +1,24 @@
 """Nothing takes off for a task that cannot be flown, and a task that fails after take-off never strands the
 aircraft (issue #33 B): the FC's mission rules (adapters/osdk/limits.py) on their own, then the real adapter
-against the real simulated flight controller on one ManualClock (the harness of test_osdk_truth_model)."""
+against the real simulated flight controller on one ManualClock (the harness of tests/osdk_world.py)."""
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import math
-from collections.abc import Awaitable, Callable
-from typing import Any, TypeVar
+from typing import Any
 
 import pytest
 
-from adapters.clock import ManualClock
 from adapters.errors import DeviceError, DeviceRejected
 from adapters.osdk import wayline_plan
-from adapters.osdk.config import OsdkDeviceSettings
 from adapters.osdk.extensions import SafetyNotify
 from adapters.osdk.limits import MissionLimits, after_failure, check_mission, flat_distance
 from adapters.osdk.sim import OsdkFcModel
 from schemas.results import ResultCode
 from schemas.services import FlyToPoint, TakeoffToPoint
-from tests.test_osdk_truth_model import STEP, Line, MemoryAircraft, Sink
+from tests import osdk_world
 
-T = TypeVar("T")
 HOME = (22.5431, 113.9580)
 LIMITS = MissionLimits()
 
@@ -92,66 +87,12 @@ def test_after_failure_follows_djis_return_home_rule(
 
 
 # -- the adapter and the simulated FC ----------------------------------------------------------------------
-class World:
-    """The adapter on the simulated FC, every timer on one ManualClock."""
+class World(osdk_world.World):
+    """The adapter on the simulated FC (tests/osdk_world.py), activated and in SDK control."""
 
     def __init__(self, model: OsdkFcModel | None = None, **settings: Any) -> None:
-        self.loop = asyncio.new_event_loop()
-        self.clock = ManualClock()
-        self.model = model or OsdkFcModel()
-        self.line = Line(self.model, self.clock, self.loop)
-        self.sink = Sink()
-        cfg = OsdkDeviceSettings(
-            type="osdk", sn="OSDK-PRE-1", url="memory://fc", release_on_stop=False, **settings
-        )
-        self.adapter = MemoryAircraft(cfg, self.clock, self.line)
-        self.loop.run_until_complete(self.adapter.start(self.sink))
-        self.run(1.0)
-        assert self.adapter.activated
-        assert not isinstance(self.call(lambda: self.adapter.obtain_control(1)), DeviceError)
-
-    async def _turn(self) -> None:
-        self.clock.advance(STEP)
-        out = b"".join(self.model.tick(self.clock.monotonic()))
-        if out:
-            self.line.to_host(out)
-        for _ in range(8):
-            await asyncio.sleep(0)
-
-    def run(self, seconds: float, until: Callable[[], bool] | None = None) -> None:
-        async def go() -> None:
-            end = self.clock.monotonic() + seconds
-            while self.clock.monotonic() < end - 1e-9 and not (until is not None and until()):
-                await self._turn()
-
-        self.loop.run_until_complete(go())
-
-    def call(self, make: Callable[[], Awaitable[T]], limit: float = 10.0) -> T | DeviceError:
-        async def go() -> T | DeviceError:
-            task = asyncio.ensure_future(make())
-            waited = 0.0
-            while not task.done() and waited < limit:
-                await self._turn()
-                waited += STEP
-            assert task.done(), "a call did not end"
-            try:
-                return task.result()
-            except DeviceError as exc:
-                return exc
-
-        return self.loop.run_until_complete(go())
-
-    def events(self, method: str) -> list[dict[str, Any]]:
-        return [data for m, data in self.sink.events if m == method]
-
-    def close(self) -> None:
-        self.adapter.crash()
-        pending = asyncio.all_tasks(self.loop)
-        for task in pending:
-            task.cancel()
-        if pending:
-            self.loop.run_until_complete(asyncio.gather(*pending, return_exceptions=True))
-        self.loop.close()
+        super().__init__("OSDK-PRE-1", model, **settings)
+        self.take_control()
 
 
 @pytest.fixture

@@ -1,7 +1,7 @@
 """A model-based test of the aircraft's truth (issue #31): the real Onboard SDK adapter and its wayline
 runner against the real simulated flight controller (``OsdkFcModel``), joined by an in-memory serial line,
-every timer on one :class:`ManualClock` the test moves (no sleeping: a step of simulated seconds costs
-milliseconds).
+every timer on one ``ManualClock`` the test moves (no sleeping: a step of simulated seconds costs
+milliseconds; the harness is tests/osdk_world.py).
 
 Hypothesis interleaves what a cloud asks (a fly-to, its stop, an emergency stop, live-control sticks and
 their end, return home and its cancel, taking control back) with what happens to the aircraft (the RC takes
@@ -17,204 +17,56 @@ new one starts on the same FC). After each step that leaves 2 s of quiet, the in
 
 from __future__ import annotations
 
-import asyncio
 import math
-from collections.abc import Awaitable, Callable, Mapping
-from typing import Any, TypeVar
+from collections.abc import Awaitable, Callable
+from typing import TypeVar
 
 from hypothesis import settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, precondition, rule
 
-from adapters.base import FrameObserver
-from adapters.clock import ManualClock
-from adapters.errors import DeviceError, LinkError
-from adapters.osdk.adapter import AircraftAdapter
-from adapters.osdk.config import OsdkDeviceSettings
+from adapters.errors import DeviceError
 from adapters.osdk.mission import mode_code
-from adapters.osdk.sim import OsdkFcModel
 from schemas.services import FlyToPoint
+from tests.osdk_world import MemoryAircraft, World
 
 T = TypeVar("T")
 SN = "OSDK-MODEL-1"
-STEP = 0.05  # s of simulated time per turn of the world
-
-
-class Sink:
-    """The gateway's side of the adapter's reports, recorded."""
-
-    def __init__(self) -> None:
-        self.events: list[tuple[str, dict[str, Any]]] = []
-
-    def osd(self, sn: str, data: Mapping[str, Any]) -> None: ...
-
-    def state(self, sn: str, data: Mapping[str, Any]) -> None: ...
-
-    def event(self, sn: str, method: str, data: Mapping[str, Any], need_reply: bool = False) -> None:
-        self.events.append((method, dict(data)))
-
-    def online_changed(self, sn: str, online: bool) -> None: ...
-
-    def authority_lost(self, sn: str) -> None: ...
-
-
-class Line:
-    """The serial line: bytes the adapter writes reach the FC model at once, the FC's answers and pushes
-    reach the adapter on the loop's next turn (as a real link's reader hands them over)."""
-
-    def __init__(self, model: OsdkFcModel, clock: ManualClock, loop: asyncio.AbstractEventLoop) -> None:
-        self.model, self.clock, self.loop = model, clock, loop
-        self.adapter: AircraftAdapter | None = None
-        self.cut = False  # the cable is out
-
-    def to_fc(self, data: bytes) -> None:
-        out = b"".join(self.model.feed(data, self.clock.monotonic()))
-        if out:
-            self.to_host(out)
-
-    def to_host(self, data: bytes) -> None:
-        adapter = self.adapter
-        if adapter is not None and not self.cut:
-            self.loop.call_soon(adapter._on_bytes, data)  # the emergency stop writes from off the loop
-
-
-class LineLink:
-    """The adapter's end of :class:`Line` (what supervision needs of a link)."""
-
-    kind, where = "serial", "memory://fc"
-    frames_in: int | None = None
-    bytes_in: int | None = None
-    bytes_out: int | None = None
-
-    def __init__(self, line: Line, on_down: Callable[[str], None]) -> None:
-        self.line, self.on_down = line, on_down
-        self.observer: FrameObserver | None = None
-        self.opens = self.frames_out = self.send_errors = 0
-        self._up = False
-
-    @property
-    def up(self) -> bool:
-        return self._up and not self.line.cut
-
-    async def open(self) -> None:
-        if self.line.cut:
-            raise LinkError("the cable is out")
-        self._up = True
-        self.opens += 1
-
-    def close(self) -> None:
-        self._up = False
-
-    def write(self, frame: bytes) -> None:
-        if not self.up:
-            raise LinkError("link down")
-        self.frames_out += 1
-        self.line.to_fc(frame)
-
-
-class MemoryAircraft(AircraftAdapter):
-    """The real adapter on :class:`LineLink` instead of a serial port."""
-
-    def __init__(self, settings: OsdkDeviceSettings, clock: ManualClock, line: Line) -> None:
-        super().__init__(settings, clock=clock)
-        self._line = line
-
-    async def start(self, sink: Any) -> None:
-        self._sink = sink
-        self._link = LineLink(self._line, self._on_link_down)  # type: ignore[assignment]
-        self._line.adapter = self
-        loop = asyncio.get_running_loop()
-        self._tasks += [loop.create_task(self._supervise()), loop.create_task(self._retransmit())]
-
-    def crash(self) -> None:
-        """The process dies: its tasks stop, nothing is sent (no stop, no release)."""
-        for task in [*self._tasks, self._mission_task]:
-            if task is not None:
-                task.cancel()
-        self._line.adapter = None
-
-
-def _settings() -> OsdkDeviceSettings:
-    return OsdkDeviceSettings(type="osdk", sn=SN, url="memory://fc", on_stop="hover", release_on_stop=False)
 
 
 class AircraftTruth(RuleBasedStateMachine):
     def __init__(self) -> None:
         super().__init__()
-        self.loop = asyncio.new_event_loop()
-        self.clock = ManualClock()
-        self.model = OsdkFcModel()
-        self.line = Line(self.model, self.clock, self.loop)
-        self.sink = Sink()
-        self.adapter = self._new_adapter()
+        self.world = World(SN, on_stop="hover")
+        self.clock, self.model, self.line = self.world.clock, self.world.model, self.world.line
         self.sticks = False  # live control streams a set-point
         self.fly_tos = 0
 
-    # -- the harness ---------------------------------------------------------------------------------
-    def _new_adapter(self) -> MemoryAircraft:
-        adapter = MemoryAircraft(_settings(), self.clock, self.line)
-        self.loop.run_until_complete(adapter.start(self.sink))
-        return adapter
-
-    async def _spin(self) -> None:
-        for _ in range(8):
-            await asyncio.sleep(0)
+    # -- the harness (tests/osdk_world.py) -------------------------------------------------------------
+    @property
+    def adapter(self) -> MemoryAircraft:
+        return self.world.adapter  # a new one after a gateway restart
 
     def _world(self, seconds: float) -> None:
         """Let ``seconds`` of simulated time pass: the FC flies and pushes, the adapter's timers run, and
         live control (when streaming) sends its set-point every tick, as the motion writer does."""
+        self.world.run(seconds, each=self._sticks)
 
-        async def run() -> None:
-            end = self.clock.monotonic() + seconds
-            while self.clock.monotonic() < end - 1e-9:
-                self.clock.advance(STEP)
-                out = b"".join(self.model.tick(self.clock.monotonic()))
-                if out:
-                    self.line.to_host(out)
-                if self.sticks:
-                    self.adapter.drive(4.0, 0.0, 0.0, 0.0)
-                await self._spin()
-
-        self.loop.run_until_complete(run())
+    def _sticks(self) -> None:
+        if self.sticks:
+            self.adapter.drive(4.0, 0.0, 0.0, 0.0)
 
     def _call(self, make: Callable[[], Awaitable[T]], limit: float = 10.0) -> T | DeviceError:
         """Run one of the adapter's coroutines to its end while the world turns (its ACKs take time)."""
-
-        async def run() -> T | DeviceError:
-            task = asyncio.ensure_future(make())
-            waited = 0.0
-            while not task.done() and waited < limit:
-                self.clock.advance(STEP)
-                out = b"".join(self.model.tick(self.clock.monotonic()))
-                if out:
-                    self.line.to_host(out)
-                await self._spin()
-                waited += STEP
-            if not task.done():
-                task.cancel()
-                raise AssertionError(f"a call did not end within {limit} s of simulated time")
-            try:
-                return task.result()
-            except DeviceError as exc:
-                return exc
-
-        return self.loop.run_until_complete(run())
+        return self.world.call(make, limit)
 
     def teardown(self) -> None:
-        self.adapter.crash()
-        pending = asyncio.all_tasks(self.loop)
-        for task in pending:
-            task.cancel()
-        if pending:
-            self.loop.run_until_complete(asyncio.gather(*pending, return_exceptions=True))
-        self.loop.close()
+        self.world.close()
 
     # -- start: the aircraft in the air under SDK control ----------------------------------------------
     @initialize()
     def airborne(self) -> None:
-        self._world(1.0)  # activation, telemetry
-        assert self.adapter.activated, "the adapter never activated"
-        assert not isinstance(self._call(lambda: self.adapter.obtain_control(1)), DeviceError)
+        self.world.take_control()  # activation, telemetry
         assert not isinstance(self._call(lambda: self.adapter.flight_task("takeoff")), DeviceError)
         self._world(4.0)
         assert self.model.in_air
@@ -290,7 +142,7 @@ class AircraftTruth(RuleBasedStateMachine):
         self.adapter.crash()
         self.sticks = False  # a new process has no live-control session
         self._world(0.5)
-        self.adapter = self._new_adapter()
+        self.world.start_adapter()
 
     @precondition(lambda self: self.model.in_air)
     @rule(seconds=st.sampled_from([0.2, 1.0, 3.0]))
