@@ -905,6 +905,57 @@ def test_the_phone_view_does_not_overflow_sideways(chromium: Any, gateway: dict[
         page.close()
 
 
+def test_the_tablet_layout_in_portrait_and_landscape(
+    chromium: Any, gateway: dict[str, Any], tmp_path: Path
+) -> None:
+    """Issue #35's tablet (768–1180 px): at 768×1024 and 1024×768 nothing is wider than the screen; the map
+    and the device list are both in view, side by side in landscape (the instruments under the devices);
+    the emergency stop is in view, uncovered and at least 44×44 px, the action buttons 44 px high; the
+    live-control panel is within the screen's width. Screenshots: console-tablet-{portrait,landscape}.png."""
+    page = chromium.new_page()
+    try:
+        page.goto(gateway["url"] + "/")
+        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=10000)
+        page.wait_for_selector("#map-svg .aircraft-mark", timeout=10000)
+
+        def box(selector: str) -> dict[str, float]:
+            found = page.locator(selector).bounding_box()
+            assert found is not None and found["width"] > 0 and found["height"] > 0, selector
+            return dict(found)
+
+        for width, height, name in ((768, 1024, "portrait"), (1024, 768, "landscape")):
+            page.set_viewport_size({"width": width, "height": height})
+            page.evaluate("() => window.scrollTo(0, 0)")
+            wide = page.evaluate("() => document.documentElement.scrollWidth")
+            assert wide <= page.evaluate("() => innerWidth") == width, (name, wide)
+            # the device list's panel (its table may scroll inside it) and the map: in view without scrolling
+            the_map, devices = box("#map-svg"), box("#devices")
+            assert page.locator('#device-table tr[data-sn="OSDK-SIM-0001"]').is_visible()
+            for what, b in (("map", the_map), ("devices", devices)):
+                assert b["x"] >= 0 and b["x"] + b["width"] <= width, (name, what, b)
+                assert b["y"] >= 0 and b["y"] + min(b["height"], 100) <= height, (name, what, b)
+            if name == "landscape":
+                assert the_map["x"] + the_map["width"] <= devices["x"], (the_map, devices)  # side by side
+                assert devices["y"] < the_map["y"] + the_map["height"], (the_map, devices)
+                instruments = box("#instruments")
+                assert instruments["x"] >= devices["x"] and instruments["y"] > devices["y"], instruments
+            stop = box("#estop")
+            assert stop["width"] >= 44 and stop["height"] >= 44, (name, stop)
+            assert stop["x"] >= 0 and stop["x"] + stop["width"] <= width, (name, stop)
+            assert stop["y"] >= 0 and stop["y"] + stop["height"] <= height, (name, stop)
+            assert page.evaluate(
+                "([x, y]) => document.elementFromPoint(x, y)?.closest('#estop') !== null",
+                [stop["x"] + stop["width"] / 2, stop["y"] + stop["height"] / 2],
+            ), name
+            for button in ("#pilot-take", "#action-send", "#signin button"):
+                assert box(button)["height"] >= 44, (name, button)
+            pilot = box("#pilot")
+            assert pilot["x"] >= 0 and pilot["x"] + pilot["width"] <= width, (name, pilot)
+            _shoot(page, _shots(tmp_path) / f"console-tablet-{name}.png")
+    finally:
+        page.close()
+
+
 def test_the_page_greys_within_3_s_when_the_gateway_goes_away(chromium: Any, gateway: dict[str, Any]) -> None:
     """Issue #35: a gateway that stops answering (SIGSTOP: its connection stays open, nothing comes) greys
     the whole page within 3 s, and it is live again once the gateway is; a gateway that stops (SIGTERM)
