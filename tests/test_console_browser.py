@@ -480,6 +480,118 @@ def test_fly_from_the_page_with_the_keyboard_and_its_dead_man(chromium: Any, gat
             page.close()
 
 
+#: A test-controlled gamepad for the page (headless Chromium has none): ``navigator.getGamepads`` returns
+#: ``window.__pad`` (the standard mapping; the test moves its axes and unplugs it through page.evaluate).
+FAKE_GAMEPAD = """
+window.__pad = {connected: true, axes: [0, 0, 0, 0], buttons: [], mapping: "standard", id: "test pad",
+                index: 0, timestamp: 0};
+Object.defineProperty(navigator, "getGamepads", {configurable: true, value: () => [window.__pad]});
+"""
+
+#: Unplug the pad and resolve with the ms until the page shows (and so has sent) a zero forward stick.
+UNPLUG = """event => new Promise(resolve => {
+  const box = document.querySelector("#pilot-sticks");
+  const started = performance.now();
+  const seen = new MutationObserver(() => {
+    if (box.dataset.y === "0") { seen.disconnect(); resolve(performance.now() - started); }
+  });
+  seen.observe(box, {attributes: true});
+  window.__pad.connected = false;
+  if (event) {  // what the browser fires on unplugging (a plain Event: a GamepadEvent needs a real pad)
+    const ev = new Event("gamepaddisconnected");
+    Object.defineProperty(ev, "gamepad", {value: window.__pad});
+    window.dispatchEvent(ev);
+    if (box.dataset.y === "0") { seen.disconnect(); resolve(0); }  // zeroed in the event's own task
+  }
+})"""
+
+
+def test_fly_from_the_page_with_a_gamepad_and_its_dead_man(chromium: Any, gateway: dict[str, Any]) -> None:
+    """The gamepad path of "Fly from this page", end to end (a fake standard-mapping pad: headless Chromium
+    has none): the right stick forward (axes[3] −1) flies the aircraft forward at the page's speed (3 m/s
+    chosen); centred, the sticks are zero and it brakes; a stick in the deadzone (0.1) sends zero; a pad
+    that goes zeroes the sticks within one control period (100 ms) when only the period notices, in the
+    event's own task when the browser fires ``gamepaddisconnected``; a pad found with a stick held over
+    moves nothing until that stick was centred."""
+    page = chromium.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    page.add_init_script(FAKE_GAMEPAD)
+    cloud = CloudClient(gateway["broker"].host, gateway["broker"].port, GW)
+
+    def axes(*values: float) -> None:
+        page.evaluate("v => { window.__pad.axes = v; }", list(values))
+
+    def sticks() -> dict[str, str | None]:
+        return {a: page.get_attribute("#pilot-sticks", f"data-{a}") for a in "xyhw"}
+
+    zero = {"x": "0", "y": "0", "h": "0", "w": "0"}
+    try:
+        _airborne(cloud)
+        page.goto(gateway["url"] + "/")
+        page.wait_for_selector('#device-table tr[data-sn="OSDK-SIM-0001"][data-online="true"]', timeout=10000)
+        session = page.evaluate("() => fetch('/api/session').then(r => r.json())")
+        if not session.get("signed_in"):
+            page.fill("#token", TOKEN)
+            page.click("#signin button")
+        page.wait_for_selector("#signedin:not([hidden])", timeout=5000)
+        page.select_option("#pilot-speed", "3")
+        page.click("#pilot-take")
+        page.wait_for_selector("#confirm[open]", timeout=5000)
+        assert "gamepad" in page.inner_text("#confirm-text")
+        page.click("#confirm-ok")
+        page.wait_for_selector('#pilot-state[data-state="flying"]', timeout=10000)
+        page.wait_for_selector('#drc-facts[data-state="2"]', timeout=10000)
+        page.wait_for_selector("#toast div >> text=gamepad found: test pad", timeout=2000)
+
+        # the right stick forward: the page's speed (3 m/s) forward, and the aircraft flies it
+        start = wait_until(lambda: _drc_osd(cloud), 5, what="osd_info_push")
+        axes(0, 0, 0, -1.0)
+        page.wait_for_selector('#pilot-sticks[data-y="3"]', timeout=1000)
+        flown = wait_until(lambda: (d := _forward(start, _drc_osd(cloud) or start)) >= 3.0 and d, 10,
+                           what="3 m forward on the gamepad")  # fmt: skip
+        assert _speed(_drc_osd(cloud) or {}) > 2.0  # flying at the page's 3 m/s, not drifting
+        # centred: zero sticks, the aircraft brakes
+        axes(0, 0, 0, 0)
+        page.wait_for_selector('#pilot-sticks[data-y="0"]', timeout=1000)
+        centred = _stopped_within(cloud, 1.0)
+        # every stick inside the deadzone: zero is sent, nothing moves
+        axes(0.1, -0.1, 0.1, -0.1)
+        time.sleep(0.35)  # three control periods
+        assert sticks() == zero, sticks()
+        assert _speed(_drc_osd(cloud) or {}) < 0.5
+
+        # pushed again, then the pad goes with the stick held (no event: the control period notices)
+        axes(0, 0, 0, -1.0)
+        wait_until(lambda: _speed(_drc_osd(cloud) or {}) > 1.5, 5, what="flying forward again")
+        polled = float(page.evaluate(UNPLUG, False))
+        assert polled <= 100 + 30, f"the sticks zeroed {polled:.0f} ms after the pad went"  # + timer slack
+        page.wait_for_selector("#toast div.bad >> text=gamepad lost", timeout=1000)
+        unplugged = _stopped_within(cloud, 1.0)
+
+        # back with the stick still held over: nothing moves until it was centred
+        page.evaluate("() => { window.__pad.connected = true; }")
+        time.sleep(0.3)
+        assert sticks() == zero, sticks()
+        assert "centre the gamepad" in page.inner_text("#pilot-sticks")
+        axes(0, 0, 0, 0)
+        time.sleep(0.15)
+        axes(0, 0, 0, -1.0)
+        page.wait_for_selector('#pilot-sticks[data-y="3"]', timeout=1000)
+        # unplugged with the browser's event: zeroed in the event's own task, not at the next period
+        assert page.evaluate(UNPLUG, True) == 0
+        page.click("#pilot-release")
+        page.wait_for_selector('#pilot-state[data-state="off"]', timeout=2000)
+        print(
+            f"gamepad: flown {flown:.1f} m; below 0.5 m/s {centred:.2f} s after centring, "
+            f"{unplugged:.2f} s after unplugging; sticks zeroed {polled:.0f} ms after the pad went"
+        )
+        assert not errors, errors
+    finally:
+        cloud.close()
+        page.close()
+
+
 def _png(width: int, height: int, rgb: tuple[int, int, int]) -> bytes:
     """A one-colour PNG (a map tile for the tile server below)."""
 
@@ -789,6 +901,59 @@ def test_the_phone_view_does_not_overflow_sideways(chromium: Any, gateway: dict[
             assert wide <= width, (width, wide)
             box = page.locator("#estop").bounding_box()
             assert box is not None and box["x"] + box["width"] <= width
+    finally:
+        page.close()
+
+
+def test_the_tablet_layout_in_portrait_and_landscape(
+    chromium: Any, gateway: dict[str, Any], tmp_path: Path
+) -> None:
+    """Issue #35's tablet (768–1180 px): at 768×1024 and 1024×768 nothing is wider than the screen; the map
+    and the device list are both in view, side by side in landscape (the instruments under the devices);
+    the emergency stop is in view, uncovered and at least 44×44 px, the action buttons 44 px high; the
+    live-control panel is within the screen's width. Screenshots: console-tablet-{portrait,landscape}.png."""
+    page = chromium.new_page()
+    try:
+        page.goto(gateway["url"] + "/")
+        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=10000)
+        page.wait_for_selector("#map-svg .aircraft-mark", timeout=10000)
+
+        def box(selector: str) -> dict[str, float]:
+            found = page.locator(selector).bounding_box()
+            assert found is not None and found["width"] > 0 and found["height"] > 0, selector
+            return dict(found)
+
+        for width, height, name in ((768, 1024, "portrait"), (1024, 768, "landscape")):
+            page.set_viewport_size({"width": width, "height": height})
+            page.evaluate("() => window.scrollTo(0, 0)")
+            wide = page.evaluate("() => document.documentElement.scrollWidth")
+            assert wide <= page.evaluate("() => innerWidth") == width, (name, wide)
+            # the device list's panel (its table may scroll inside it) and the map: in view without scrolling
+            the_map, devices = box("#map-svg"), box("#devices")
+            assert page.locator('#device-table tr[data-sn="OSDK-SIM-0001"]').is_visible()
+            for what, b in (("map", the_map), ("devices", devices)):
+                assert b["x"] >= 0 and b["x"] + b["width"] <= width, (name, what, b)
+                assert b["y"] >= 0 and b["y"] + min(b["height"], 100) <= height, (name, what, b)
+            if name == "landscape":
+                assert the_map["x"] + the_map["width"] <= devices["x"], (the_map, devices)  # side by side
+                assert devices["y"] < the_map["y"] + the_map["height"], (the_map, devices)
+                instruments = box("#instruments")
+                assert instruments["x"] >= devices["x"] and instruments["y"] > devices["y"], instruments
+            stop = box("#estop")
+            assert stop["width"] >= 44 and stop["height"] >= 44, (name, stop)
+            assert stop["x"] >= 0 and stop["x"] + stop["width"] <= width, (name, stop)
+            assert stop["y"] >= 0 and stop["y"] + stop["height"] <= height, (name, stop)
+            assert page.evaluate(
+                "([x, y]) => document.elementFromPoint(x, y)?.closest('#estop') !== null",
+                [stop["x"] + stop["width"] / 2, stop["y"] + stop["height"] / 2],
+            ), name
+            # the sign-in's button or the sign-out (the module's browser may hold a session already)
+            signing = "#signout" if page.is_visible("#signout") else "#signin button"
+            for button in ("#pilot-take", "#action-send", signing):
+                assert box(button)["height"] >= 44, (name, button)
+            pilot = box("#pilot")
+            assert pilot["x"] >= 0 and pilot["x"] + pilot["width"] <= width, (name, pilot)
+            _shoot(page, _shots(tmp_path) / f"console-tablet-{name}.png")
     finally:
         page.close()
 

@@ -6,6 +6,11 @@
 // (a zero stick is sent then, not at the next period); the gateway zeroes them too when the page's sticks
 // stop for drc.stick_timeout (0.5 s) or its heartbeats for drc.heartbeat_timeout, and when the page's
 // WebSocket closes. Sticks: x left +, y forward +, h up +, w yaw clockwise + (the seed's; fly.py's keys).
+//
+// Gamepad: only a pad with the browser's standard mapping is used (another pad's axes 2 and 3 may be
+// triggers resting at -1: full sideways); it is read every period, and a pad that goes (unplugged, or the
+// browser's `gamepaddisconnected`) zeroes its sticks at once. A pad found, or taken control with, moves
+// nothing until its sticks have been centred once (a stick held over at the start does not fly off).
 import { $, fmt, toast } from "./dom.js";
 import { send, csrfToken } from "./api.js";
 
@@ -31,6 +36,9 @@ const pilot = {
   catalog: null,
   ask: null, // the confirmation dialog (actions.js)
   aircraft: null, // the sn the sticks move (shown in the confirmation)
+  pad: null, // the id of the gamepad in use (its loss is told and zeroes its sticks)
+  padArmed: false, // its sticks were centred since it was found or control was taken
+  padIgnored: new Set(), // ids of pads without the standard mapping (told once)
 };
 
 function limits() {
@@ -49,13 +57,54 @@ function sticks() {
   return out;
 }
 
+/** The first connected pad with the standard mapping (others are told once and never read). */
+function findPad() {
+  let pads = [];
+  try {
+    pads = typeof navigator.getGamepads === "function" ? Array.from(navigator.getGamepads() || []) : [];
+  } catch {
+    pads = []; // a browser that refuses the Gamepad API here (permissions policy): no pad
+  }
+  for (const p of pads) {
+    if (!p || !p.connected) continue;
+    if (p.mapping === "standard" && p.axes && p.axes.length >= 4) return p;
+    if (!pilot.padIgnored.has(p.id)) {
+      pilot.padIgnored.add(p.id);
+      toast(`gamepad ${p.id} ignored: the browser knows no standard mapping for it`, true);
+    }
+  }
+  return null;
+}
+
+/** The pad's axes (deadzone applied), or null: no pad, or its sticks not centred yet since it was found. */
 function gamepad() {
+  const pad = findPad();
+  if (!pad) {
+    if (pilot.pad !== null) {
+      toast(`gamepad lost (${pilot.pad}): its sticks zeroed`, true);
+      pilot.pad = null;
+    }
+    return null;
+  }
+  if (pilot.pad !== pad.id) {
+    pilot.pad = pad.id;
+    pilot.padArmed = false;
+    toast(`gamepad found: ${pad.id}${pilot.flying ? "" : " (it flies once you take control)"}`);
+  }
   // the standard mapping: left stick yaw (x) and climb (y), right stick lateral (x) and forward (y)
-  const pads = typeof navigator.getGamepads === "function" ? navigator.getGamepads() : [];
-  const pad = Array.from(pads || []).find((p) => p && p.connected && p.axes.length >= 4);
-  if (!pad) return null;
   const dz = (v) => (Math.abs(v) < DEADZONE ? 0 : v);
-  return { w: dz(pad.axes[0]), h: -dz(pad.axes[1]), x: -dz(pad.axes[2]), y: -dz(pad.axes[3]) };
+  const axes = { w: dz(pad.axes[0]), h: -dz(pad.axes[1]), x: -dz(pad.axes[2]), y: -dz(pad.axes[3]) };
+  if (!pilot.padArmed) {
+    if (Object.values(axes).some((v) => v !== 0)) return null;
+    pilot.padArmed = true;
+  }
+  return axes;
+}
+
+/** A pad came or went (the browser's events): told now; while flying its loss zeroes the sticks at once. */
+function onPadChange(event) {
+  if (pilot.flying) tick(event.type === "gamepaddisconnected" ? "gamepad lost" : undefined);
+  else gamepad();
 }
 
 function wire(method, data) {
@@ -84,7 +133,7 @@ function tick(why) {
     return;
   }
   pilot.sent = values;
-  show(values, why);
+  show(values, why || (pilot.pad !== null && !pilot.padArmed ? "centre the gamepad's sticks to fly with it" : ""));
 }
 
 /** Zero every axis and send that at once (the dead-man). */
@@ -120,7 +169,7 @@ async function take() {
   const lim = limits();
   const target = pilot.aircraft || "the aircraft";
   const text =
-    `Fly ${target} from this page: while a key is held it moves at up to ${lim.y} m/s forward/back and ` +
+    `Fly ${target} from this page: while a key is held (or a gamepad's stick pushed) it moves at up to ${lim.y} m/s forward/back and ` +
     `left/right, ${lim.h} m/s up/down and ${lim.w} °/s yaw; it stops (hovers) when the key is released, the ` +
     `window or tab loses focus, or the connection drops. The gateway ${gw.sn} grabs flight authority and ` +
     `enters live control on its own broker (${gw.prefill.mqtt_broker.address}).`;
@@ -144,6 +193,7 @@ async function take() {
   pilot.since = Date.now();
   pilot.lastBeat = 0;
   pilot.held.clear();
+  pilot.padArmed = false; // a gamepad flies once its sticks were centred
   setState("flying", "flying from this page");
   tick();
   pilot.timer = setInterval(tick, PERIOD_MS);
@@ -240,6 +290,8 @@ export function init() {
     if (document.visibilityState !== "visible") zero("the tab is hidden");
   });
   window.addEventListener("pagehide", () => zero("the page is closing"));
+  window.addEventListener("gamepadconnected", onPadChange);
+  window.addEventListener("gamepaddisconnected", onPadChange);
   setState("off", "not flying");
   show({ x: 0, y: 0, h: 0, w: 0 });
 }
