@@ -895,8 +895,9 @@ def test_the_phone_view_does_not_overflow_sideways(chromium: Any, gateway: dict[
         for width, height in ((390, 844), (768, 1024)):
             page.set_viewport_size({"width": width, "height": height})
             page.goto(gateway["url"] + "/")
-            page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=10000)
-            page.wait_for_selector("#map-svg .aircraft-mark", timeout=10000)
+            # (20 s: a page drawn from scratch by a Chromium that shares two cores with the suite)
+            page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=20000)
+            page.wait_for_selector("#map-svg .aircraft-mark", timeout=20000)
             wide = page.evaluate("() => document.documentElement.scrollWidth")
             assert wide <= width, (width, wide)
             box = page.locator("#estop").bounding_box()
