@@ -940,6 +940,12 @@ def test_the_tablet_layout_in_portrait_and_landscape(
                 assert devices["y"] < the_map["y"] + the_map["height"], (the_map, devices)
                 instruments = box("#instruments")
                 assert instruments["x"] >= devices["x"] and instruments["y"] > devices["y"], instruments
+            # every section link in view, none reached only by swiping the link row (which clips, unseen)
+            nav = page.evaluate(
+                "() => { const n = document.querySelector('nav'); "
+                "return [n.scrollWidth, n.clientWidth, n.getBoundingClientRect().right]; }"
+            )
+            assert nav[0] <= nav[1] and nav[2] <= width, (name, nav)  # fmt: skip
             stop = box("#estop")
             assert stop["width"] >= 44 and stop["height"] >= 44, (name, stop)
             assert stop["x"] >= 0 and stop["x"] + stop["width"] <= width, (name, stop)
