@@ -19,10 +19,12 @@ import math
 import os
 import random
 import statistics
+import tempfile
 import threading
 import time
 import uuid
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import paho.mqtt.client as paho
@@ -283,6 +285,7 @@ class Failover:
     proven: float  # kill → the gateway's link on a surviving node proved it receives (its probe came back)
     consumer_ready: float  # kill → its request consumer and the MQTT streams have leaders (ConsumerWatch)
     fresh_answer: float  # kill → the gateway answered a request a new client published once they had
+    settled_elsewhere: bool = False  # the gateway's first node failed its probe at start (see measure_round)
 
     @property
     def broker_ready(self) -> float:
@@ -304,8 +307,16 @@ class Failover:
         return self.proven - self.broker_ready
 
 
-def measure_round(cluster: NatsCluster, victim: int) -> Failover:
-    """One round: the gateway starts on ``victim``, which is SIGKILLed mid-traffic (then restarted)."""
+def measure_round(cluster: NatsCluster, first: int, state_dir: Path) -> Failover:
+    """One round: the gateway starts on ``first``, and the node it settles on (``first``, unless that one
+    fails the gateway's first probes) is SIGKILLed mid-traffic (then restarted).
+
+    Every round's gateway keeps its state in ``state_dir``, as a gateway restarted in the field does: a
+    full run once counted 81 photos for 40 requests in a round, 41 more than sent, exactly as many as the
+    round before had answered after its kill: most likely NATS redelivered those to the next gateway, whose
+    store (in memory then) had never seen them; not proven (16 rounds since did not repeat it), and the
+    error now says what the gateway ran and answered. With the store kept, a redelivered request is
+    answered from the reply journal, not acted on again."""
     channel = f"djigw-fo-{uuid.uuid4().hex[:8]}"
     sim = GimbalCanSim(interface="virtual", channel=channel).start()
     # the gimbal's reply deadline at its ceiling (2 s, default 0.3 s): this suite counts lost and doubled
@@ -313,13 +324,14 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
     # five other test workers) a reply late by 0.3 s was answered 325004 and failed the suite
     device = {"type": "rsdk", "sn": "RSDK-CL-1", "interface": "virtual", "channel": channel,
               "request_timeout": 2.0}  # fmt: skip
-    urls = [cluster.url(victim)] + [cluster.url(i) for i in range(cluster.NODES) if i != victim]
+    urls = [cluster.url(first)] + [cluster.url(i) for i in range(cluster.NODES) if i != first]
+    victim = first
     settings = gateway_settings(
-        1, [device], gateway_sn=GW, dispatcher={"require_authority": False},
+        1, [device], gateway_sn=GW, dispatcher={"require_authority": False}, state_dir=str(state_dir),
         broker={"url": urls, "protocol": "3.1.1", "reconnect_min": 0.5, "reconnect_max": 30.0},
     )  # fmt: skip
-    cloud = Cloud(cluster.host, cluster.mqtt_ports[2])
     gw = GatewayThread(settings).start()
+    cloud: Cloud | None = None  # on a node the round does not kill, once the gateway has settled
     sent: dict[str, float] = {}
     published: dict[str, float] = {}  # tid → when the gateway handed its reply to the broker connection
     stop = threading.Event()
@@ -329,9 +341,12 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
             published.setdefault(json.loads(payload)["tid"], time.monotonic())
 
     def traffic() -> None:
+        assert cloud is not None
         n = 0
         while not stop.wait(0.1):
-            tid = f"photo-{victim}-{n}-{uuid.uuid4().hex[:4]}"
+            # a UUID, as a real cloud's tid: the journal kept across rounds is keyed by tid (4 hex digits
+            # collided once in 14 rounds: a request answered from an earlier round's reply)
+            tid = f"photo-{victim}-{n}-{uuid.uuid4().hex}"
             n += 1
             sent[tid] = time.monotonic()
             cloud.request(tid)
@@ -343,8 +358,15 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
     try:
         wait_until(lambda: gw.app.devices.by_sn("RSDK-CL-1").online, 10, what="gimbal online")
         gw.app.published.append(on_published)  # the console's hook: what the gateway published, when
-        if gw.app.bridge.current.port != cluster.mqtt_ports[victim]:
-            raise AssertionError("the gateway did not start on the first url")
+        # A node the last round restarted can still be electing its JetStream leaders when wait_ready says
+        # it serves: the gateway's first probe there is not answered and it moves on, next node first,
+        # until one delivers (a full bench run saw it once in 20 rounds). The round kills the node the
+        # gateway settles on, and says so.
+        bridge = gw.app.bridge
+        wait_until(lambda: bridge.connected and bridge.liveness.state.value == "live", 30,
+                   what="the gateway's link proven")  # fmt: skip
+        victim = cluster.mqtt_ports.index(bridge.current.port)
+        cloud = Cloud(cluster.host, cluster.mqtt_ports[2 if victim != 2 else 0])
         sender.start()
         wait_until(lambda: len(cloud.answered()) >= 20, 30, what="20 answers before the kill")
         watch = ConsumerWatch(cluster.host, [p for i, p in enumerate(cluster.client_ports) if i != victim],
@@ -411,12 +433,18 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
             if len(set(replies[tid])) != 1 or json.loads(replies[tid][0])["data"] != {"result": 0}:
                 raise AssertionError(f"{tid}: {replies[tid]}")
         if sim.model.photos != len(sent):
-            raise AssertionError(f"{sim.model.photos} photos for {len(sent)} requests")
+            m = gw.app.metrics
+            raise AssertionError(
+                f"{sim.model.photos} photos for {len(sent)} requests: the gateway ran "
+                f"{m.count('services_total', method='camera_photo_take', result=0):.0f} camera_photo_take, "
+                f"{m.count('services_duplicates_total'):.0f} duplicates answered from its cache; "
+                f"tids answered {len(replies)} (not sent here: {len(set(replies) - set(sent))})"
+            )
         node = cluster.mqtt_ports.index(bridge.current.port)
         return Failover(victim, reconnected, first_answer, len(sent), len(after()),
                         sum(len(r) - 1 for r in replies.values()), node, ready_at - killed_at,
                         gateway_answer, clean_at - killed_at, proven_at - killed_at,
-                        consumer_at - killed_at, fresh_at - killed_at)  # fmt: skip
+                        consumer_at - killed_at, fresh_at - killed_at, victim != first)  # fmt: skip
     finally:
         stop.set()
         for p in (probe, clean):
@@ -425,7 +453,8 @@ def measure_round(cluster: NatsCluster, victim: int) -> Failover:
         if watch is not None:
             watch.stop()
         gw.stop()
-        cloud.close()
+        if cloud is not None:
+            cloud.close()
         sim.stop()
         cluster.start_node(victim)
         cluster.wait_ready([victim])
@@ -511,9 +540,12 @@ def run(cfg: Config) -> list[Row]:
     rounds = 1 if cfg.quick else int(os.environ.get("DJIGW_FAILOVER_ROUNDS", "20"))
     results: list[Failover] = []
     mqtt_extra = os.environ.get("DJIGW_FAILOVER_NATS_MQTT", "")  # e.g. "consumer_memory_storage: true"
-    with NatsCluster(mqtt_extra=mqtt_extra) as cluster:
+    with (
+        NatsCluster(mqtt_extra=mqtt_extra) as cluster,
+        tempfile.TemporaryDirectory(prefix="fo-state-") as state,
+    ):
         for k in range(rounds):
-            results.append(measure_round(cluster, k % 2))
+            results.append(measure_round(cluster, k % 2, Path(state)))
             r = results[-1]
             line = (f"  .. failover {k + 1}/{rounds}: kill node {r.victim + 1}: cluster serves again after "
                     f"{r.cluster_ready:.2f} s, its JetStream leaders after {r.consumer_ready:.2f} s, "
@@ -522,7 +554,9 @@ def run(cfg: Config) -> list[Row]:
                     f"fresh request answered after {r.fresh_answer:.2f} s (share {r.gateway_share:+.2f} s), "
                     f"the bench cloud's first request answered after {r.gateway_answer:.2f} s "
                     f"(received {r.first_answer:.2f} s), "
-                    f"{r.after} answered after; a clean session after {r.clean_ready:.2f} s")  # fmt: skip
+                    f"{r.after} answered after; a clean session after {r.clean_ready:.2f} s"
+                    + (" (its first node failed its start-up probe: it settled here)" if r.settled_elsewhere
+                       else ""))  # fmt: skip
             print(line, flush=True)
     deaf_rounds = 1 if cfg.quick else int(os.environ.get("DJIGW_DEAF_ROUNDS", "10"))
     deafs: list[DeafRound] = []

@@ -391,6 +391,16 @@ def _stopped_within(cloud: CloudClient, seconds: float) -> float:
     raise AssertionError(f"still {_speed(osd) if osd else '?'} m/s {seconds} s after the dead-man")
 
 
+def _sign_in(page: Any) -> None:
+    """Sign the page in, unless the module's browser holds a session already: the gateway is asked (the form
+    is visible until the page's own session request comes back, so its visibility says nothing yet)."""
+    session = page.evaluate("() => fetch('/api/session').then(r => r.json())")
+    if not session.get("signed_in"):
+        page.fill("#token", TOKEN)
+        page.click("#signin button")
+    page.wait_for_selector("#signedin:not([hidden])", timeout=5000)
+
+
 def _airborne(cloud: CloudClient) -> None:
     """The aircraft in the air (the walkthrough test leaves it there; alone, this test takes off)."""
     osd = cloud.wait_for("OSDK-SIM-0001/osd", timeout=10)[-1]["data"]
@@ -431,11 +441,7 @@ def test_fly_from_the_page_with_the_keyboard_and_its_dead_man(chromium: Any, gat
         _airborne(cloud)
         page.goto(gateway["url"] + "/")
         page.wait_for_selector('#device-table tr[data-sn="OSDK-SIM-0001"][data-online="true"]', timeout=10000)
-        session = page.evaluate("() => fetch('/api/session').then(r => r.json())")
-        if not session.get("signed_in"):
-            page.fill("#token", TOKEN)
-            page.click("#signin button")
-        page.wait_for_selector("#signedin:not([hidden])", timeout=5000)
+        _sign_in(page)
         page.click("#pilot-take")
         page.wait_for_selector("#confirm[open]", timeout=5000)
         text = page.inner_text("#confirm-text")
@@ -530,11 +536,7 @@ def test_fly_from_the_page_with_a_gamepad_and_its_dead_man(chromium: Any, gatewa
         _airborne(cloud)
         page.goto(gateway["url"] + "/")
         page.wait_for_selector('#device-table tr[data-sn="OSDK-SIM-0001"][data-online="true"]', timeout=10000)
-        session = page.evaluate("() => fetch('/api/session').then(r => r.json())")
-        if not session.get("signed_in"):
-            page.fill("#token", TOKEN)
-            page.click("#signin button")
-        page.wait_for_selector("#signedin:not([hidden])", timeout=5000)
+        _sign_in(page)
         page.select_option("#pilot-speed", "3")
         page.click("#pilot-take")
         page.wait_for_selector("#confirm[open]", timeout=5000)
@@ -853,13 +855,7 @@ def test_the_operator_accepts_a_cloud_control_request_in_the_page(
     try:
         page.goto(gateway["url"] + "/")
         page.wait_for_function("() => document.querySelector('#gw-sn').textContent !== ''", timeout=5000)
-        # the module's browser may hold a session already: ask the gateway (the form is visible until the
-        # page's own session request comes back, so its visibility says nothing yet)
-        session = page.evaluate("() => fetch('/api/session').then(r => r.json())")
-        if not session.get("signed_in"):
-            page.fill("#token", TOKEN)
-            page.click("#signin button")
-        page.wait_for_selector("#signedin:not([hidden])", timeout=5000)
+        _sign_in(page)
         assert page.locator("#cloud-control").is_hidden()  # nobody has asked yet: nothing to show
         bid = "5d0c3c9e-3f51-4a8e-9a8f-7c1f0e2d4b6a"
         cloud.publish(
