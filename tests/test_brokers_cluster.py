@@ -10,6 +10,7 @@ import json
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -32,15 +33,15 @@ def cluster() -> Iterator[NatsCluster]:
         yield c
 
 
-def test_gateway_fails_over_when_its_nats_node_is_killed(cluster: NatsCluster) -> None:
+def test_gateway_fails_over_when_its_nats_node_is_killed(cluster: NatsCluster, tmp_path: Path) -> None:
     """url = [n1, n2, n3], protocol 3.1.1: the gateway connects to n1; n1 is SIGKILLed with requests in
     flight (10/s, none re-sent by the cloud): the gateway is on another node at once; services are
     answered again, 20 of 20 afterwards; every request answered, none acted on twice
     (``bench/failover.py``; ``make bench`` runs twenty, with the broker's and the gateway's shares)."""
-    r = measure_round(cluster, 0)
+    r = measure_round(cluster, 0, tmp_path)
     print(f"\nfailover: on node {r.node + 1} {r.reconnected:.2f} s after the kill, answered again "
           f"after {r.first_answer:.2f} s, {r.requests} requests, {r.redelivered} twice")  # fmt: skip
-    assert r.node != 0 and r.after >= 20
+    assert r.node != r.victim and r.after >= 20  # (the victim: node 1, or where the gateway settled)
     # the gateway's own part is ~0.5 s, but NATS refuses CONNECTs (closed before CONNACK) until the
     # surviving nodes have elected new JetStream leaders: 9.7-9.8 s in about one run in four here.
     # The 10 s target is measured by `make bench` (failover suite); this deadline is for a loaded CI
