@@ -1,7 +1,9 @@
 """Start a private mosquitto on a free loopback port: for ``make run`` and for the test suite.
 
 Owns the mosquitto process, its config file and its readiness check. Knows nothing of the Cloud
-API. Never binds anything but loopback, and never reuses a broker someone else started.
+API. Never binds anything but loopback, and never reuses a broker someone else started. The temporary
+directory it makes (config, log, database) is removed when the object goes away (a test suite made some
+150 per run and left them in /tmp); a ``workdir`` given to it is left alone.
 
 Time: real (``time.monotonic``/``time.sleep``): it waits for an operating-system process, not a timer of
 the gateway's.
@@ -19,6 +21,7 @@ import socket
 import subprocess
 import tempfile
 import time
+import weakref
 from pathlib import Path
 
 __all__ = ["LocalBroker", "find_mosquitto", "free_port", "port_open"]
@@ -103,6 +106,8 @@ class LocalBroker:
         self.port = port or free_port()
         self._dir = Path(workdir) if workdir else Path(tempfile.mkdtemp(prefix="djigw-mosq-"))
         self._dir.mkdir(parents=True, exist_ok=True)
+        if workdir is None:  # a directory of our own (config, log, database): gone with this object
+            weakref.finalize(self, shutil.rmtree, str(self._dir), ignore_errors=True)
         listener = listener_lines or f"listener {self.port} {self.host}"
         if users:
             password_file = self._dir / "passwords"
