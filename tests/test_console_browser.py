@@ -110,6 +110,12 @@ def gateway() -> Iterator[dict[str, Any]]:
         assert TOKEN not in proc.output(), "the console token reached a log line"
 
 
+#: How long a fresh page may take to draw the device table from its first push. 20 s, not 10: twice a page
+#: of this module's shared gateway had no robot row after 10 s (once beside three busy loops, once in an
+#: idle clean-clone run, the e-stop test); the cause is not found yet (a slow first push, or none).
+FIRST_DRAW_MS = 20_000
+
+
 def _shots(tmp_path: Path) -> Path:
     where = os.environ.get("DJIGW_SCREENSHOTS")
     path = Path(where) if where else tmp_path
@@ -725,7 +731,7 @@ def test_the_page_sends_no_secret_and_no_outside_request(chromium: Any, gateway:
     page.on("response", on_response)
     try:
         page.goto(gateway["url"] + "/")
-        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=10000)
+        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=FIRST_DRAW_MS)
         assert seen and all(u.startswith(gateway["url"]) for u in seen), seen
         assert any(u.endswith("/static/js/app.js") for u in seen)
         assert bodies and not any(TOKEN in b for b in bodies)
@@ -824,7 +830,7 @@ def test_the_emergency_stop_stays_in_view_wherever_the_page_is_scrolled(
     try:
         page.set_viewport_size({"width": viewport[0], "height": viewport[1]})
         page.goto(gateway["url"] + "/")
-        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=10000)
+        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=FIRST_DRAW_MS)
         assert page.evaluate("() => document.documentElement.scrollHeight") > viewport[1]  # it does scroll
         for where in ("document.body.scrollHeight / 2", "document.body.scrollHeight"):
             page.evaluate(f"() => window.scrollTo(0, {where})")
@@ -892,7 +898,7 @@ def test_the_phone_view_does_not_overflow_sideways(chromium: Any, gateway: dict[
             page.set_viewport_size({"width": width, "height": height})
             page.goto(gateway["url"] + "/")
             # (20 s: a page drawn from scratch by a Chromium that shares two cores with the suite)
-            page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=20000)
+            page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=FIRST_DRAW_MS)
             page.wait_for_selector("#map-svg .aircraft-mark", timeout=20000)
             wide = page.evaluate("() => document.documentElement.scrollWidth")
             assert wide <= width, (width, wide)
@@ -912,7 +918,7 @@ def test_the_tablet_layout_in_portrait_and_landscape(
     page = chromium.new_page()
     try:
         page.goto(gateway["url"] + "/")
-        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=10000)
+        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=FIRST_DRAW_MS)
         page.wait_for_selector("#map-svg .aircraft-mark", timeout=10000)
 
         def box(selector: str) -> dict[str, float]:
