@@ -29,7 +29,7 @@ $(PY):
 
 $(RUNTIME): $(PY) pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e .
+	$(PY) -m pip install --quiet -e '.[webrtc]'
 	@touch $(RUNTIME)
 
 $(DEV): $(RUNTIME)

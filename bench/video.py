@@ -14,6 +14,9 @@ ffmpeg of its own serving 1280×720 30 fps H.264 over TCP). Receivers are ffmpeg
   time from ``/proc/<pid>/stat`` over a window: the test pattern (draw + encode), the camera re-encoded
   (``video_quality`` 2: decode, scale, encode at 1 Mbps) and the camera passed through (``video_quality``
   0, codec h264: ``-c:v copy``).
+* **WHIP** (``url_type`` 4): the same start, stop and glass-to-glass figures through WebRTC to an aiortc
+  WHIP endpoint, with the gateway in a network namespace (WebRTC never offers loopback), and the CPU of
+  the publisher process apart from its ffmpeg.
 """
 
 from __future__ import annotations
@@ -203,9 +206,76 @@ def _cpu(rig: Rig, tmp: Path, video: str, quality: int, seconds: float, quick: b
     return used / wall * 100, frames
 
 
+def _children_cpu(pid: int) -> float:
+    """CPU seconds of ``pid``'s children (the WHIP publisher's ffmpeg)."""
+    total = 0.0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            total += _cpu_seconds(int(child))
+    return total
+
+
+def _whip(cfg: Config, tmp: Path, runs: int, window: float) -> list[Row]:
+    """The WHIP rows: ``run --simulate``'s gimbal to an aiortc WHIP endpoint, both in a network namespace
+    (tests/video_rig.whip_rig): start to first decoded frame, stop to the session's DELETE, glass to glass
+    through WebRTC, and the CPU of the publisher (aiortc: packetize + SRTP) apart from its ffmpeg."""
+    import importlib.util
+
+    from tests.netlab import netns_problem
+    from tests.video_rig import GIMBAL_VIDEO, whip_rig, whip_start
+
+    problem = netns_problem() or (None if importlib.util.find_spec("aiortc") else "aiortc is not installed")
+    if problem is not None:
+        print(f"  .. WHIP rows skipped: {problem}", flush=True)
+        return []
+    rows: list[Row] = []
+    first, ends, g2g = [], [], []
+    with whip_rig(tmp, timecode=True) as (_, rig, rx):
+        stop = {"video_id": GIMBAL_VIDEO}
+        for i in range(runs):
+            asked = time.monotonic()
+            _ok(whip_start(rig, rx.url(f"first-{i}")))
+            wait_until(lambda: rx.last is not None and rx.last.first_frame_at is not None, 20, what="a frame")
+            session = rx.last
+            assert session is not None and session.first_frame_at is not None
+            first.append((session.first_frame_at - asked) * 1000)
+            stopped = time.monotonic()
+            _ok(rig.cloud.service("live_stop_push", stop))
+            wait_until(lambda s=session: s.deleted and s.ended_at is not None, 3, what="the DELETE")
+            assert session.ended_at is not None
+            ends.append((session.ended_at - stopped) * 1000)
+        _ok(whip_start(rig, rx.url("g2g")))
+        wait_until(lambda: len(rx.latencies) >= 30, 20, what="decoded frames")
+        pid = rig.pipeline_pids()[GIMBAL_VIDEO]
+        rx.latencies.clear()
+        own, ffmpeg, t0 = _cpu_seconds(pid), _children_cpu(pid), time.monotonic()
+        time.sleep(window)
+        g2g = sorted(rx.latencies)
+        wall = time.monotonic() - t0
+        own, ffmpeg = (_cpu_seconds(pid) - own) / wall * 100, (_children_cpu(pid) - ffmpeg) / wall * 100
+        _ok(rig.cloud.service("live_stop_push", stop))
+    if len(g2g) < _floor(window, cfg.quick):
+        raise AssertionError(f"only {len(g2g)} WHIP frames decoded in {window} s")
+    p95 = g2g[int(len(g2g) * 0.95)]
+    rows.append(Row("video", "WHIP start to first frame p50 (ms)", runs, statistics.median(first), unit="ms",
+                    note=f"live_start_push → first frame decoded at an aiortc WHIP endpoint (POST, ICE, "
+                    f"DTLS included); max {max(first):.0f} ms"))  # fmt: skip
+    rows.append(Row("video", "WHIP stop to the session's end p50 (ms)", runs, statistics.median(ends),
+                    unit="ms",
+                    note=f"live_stop_push → the endpoint's DELETE; max {max(ends):.0f} ms"))  # fmt: skip
+    rows.append(Row("video", "WHIP glass to glass p50 (ms)", len(g2g), statistics.median(g2g), unit="ms",
+                    note=f"timecode drawn → decoded by aiortc; p95 {p95:.0f} ms"))  # fmt: skip
+    rows.append(Row("video", "CPU, WHIP publisher (% core)", len(g2g), own, unit="% core",
+                    note=f"aiortc: demux + packetize + SRTP, no second encode; its ffmpeg (test pattern, "
+                    f"encode) {ffmpeg:.1f} % more"))  # fmt: skip
+    return rows
+
+
 def run(cfg: Config) -> list[Row]:
     runs, window = (1, 1.5) if cfg.quick else (5, 8.0)
     rows: list[Row] = []
+    with tempfile.TemporaryDirectory(prefix="bench-whip-") as tmpdir:
+        rows += _whip(cfg, Path(tmpdir), runs, window)
     with LocalBroker() as broker, tempfile.TemporaryDirectory(prefix="bench-video-") as tmpdir:
         tmp = Path(tmpdir)
         rig = Rig(broker, tmp, camera_size=f"{W}x{H}")

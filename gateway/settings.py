@@ -386,6 +386,12 @@ class VideoSettings(BaseModel):
     memory_mb: int = Field(1024, ge=128, description="address-space limit per pipeline (prlimit --as)")
     nice: int = Field(10, ge=0, le=19, description="pipelines run at this nice level")
     preview: bool = Field(True, description="pipelines also feed the web console's preview (fragmented MP4)")
+    ice_servers: list[str] = Field(
+        default_factory=list,
+        max_length=8,
+        description="WHIP (url_type 4): STUN/TURN servers for ICE, e.g. stun:stun.example.com:3478 (none: "
+        "host candidates only, enough for a WHIP endpoint on a public address)",
+    )
 
 
 class MetricsSettings(BaseModel):

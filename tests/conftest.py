@@ -80,6 +80,7 @@ SHARED_FIXTURE_MODULES = frozenset(
         "test_fly.py",
         "test_schemas_export.py",
         "test_video.py",
+        "test_video_whip.py",
     }
 )
 #: The longest tests (40-75 s alone on 2 cores, 2026-11-28): they start before the other long ones, so

@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 BENCH_ONLY: dict[str, tuple[str, ...]] = {
     "console": ("test_console_browser.py", "test_web_console.py"),  # 7.6 s
     "fleet": ("test_takeover.py", "test_gateway_service.py"),  # 6.9 s
-    "video": ("test_video.py", "test_video_machine.py"),  # 5.1 s
+    "video": ("test_video.py", "test_video_machine.py", "test_video_whip.py"),  # 5.1 s
     "e2e": ("test_gateway_service.py", "test_cli.py"),  # 4.8 s
     "failover": ("test_brokers_cluster.py", "test_exactly_once_kill.py", "test_liveness.py"),  # 4.0 s
     "scale": ("test_gateway_robomaster.py", "test_families.py"),  # 4.0 s

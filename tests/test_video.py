@@ -65,10 +65,10 @@ def test_refusals_are_documented_codes(rig: Rig) -> None:
     start = {"url_type": 1, "url": "rtmp://127.0.0.1:9/live/x", "video_id": VIDEO, "video_quality": 0}
     refused = [
         ({"url_type": 0, "url": "channel=a&sn=b"}, 399010),  # Agora
-        ({"url_type": 4, "url": "http://h/whip"}, 399010),  # WHIP
+        ({"url_type": 4, "url": "rtmp://h/whip"}, 325001),  # WHIP takes the endpoint's http(s) URL
+        ({"url_type": 1, "url": "http://h/whip"}, 325001),  # RTMP takes rtmp(s)://
         ({"url_type": 3, "url": "serverIP=1"}, 399010),  # GB28181
         ({"video_id": "NOPE/0-0-0/normal-0"}, 399012),
-        ({"url": "http://not-rtmp/"}, 325001),
         ({"video_quality": 9}, 325001),
     ]
     for change, code in refused:

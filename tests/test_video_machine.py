@@ -5,7 +5,16 @@ from __future__ import annotations
 import pytest
 
 from adapters.clock import ManualClock
-from gateway.video.engine import Pipeline, ProgressParser, build_command, describe, read_timecode, redact_url
+from gateway.video.engine import (
+    PREVIEW_MP4,
+    WHIP_PIPE,
+    Pipeline,
+    ProgressParser,
+    build_command,
+    describe,
+    read_timecode,
+    redact_url,
+)
 from gateway.video.machine import Backoff, Kill, Phase, Spawn, StreamMachine, Target
 from gateway.video.preview import BoxSplitter, PreviewFeed
 from schemas import TopicKind, default_registry
@@ -118,6 +127,16 @@ def test_command_lines() -> None:
     sd = Pipeline("rtsp://cam/1", "h264", 1, "rtmp://h/live/k", 1)  # smooth: re-encoded to 960×540
     cmd = build_command("ffmpeg", sd)
     assert "scale=960:540" in cmd[cmd.index("-vf") + 1] and cmd[cmd.index("-b:v") + 1] == "512k"
+    # WHIP: an H.264 source is re-encoded all the same (WebRTC wants baseline without B-frames, a keyframe
+    # each second), MPEG-TS on the publisher's pipe; with the preview, a tee whose target gets SPS/PPS in band
+    whip = Pipeline("rtsp://cam/1", "h264", 4, "https://h/whip/k", 0)
+    cmd = build_command("ffmpeg", whip)
+    assert not whip.passthrough and "https://h/whip/k" not in cmd
+    assert cmd[-5:] == ["-flush_packets", "1", "-f", "mpegts", WHIP_PIPE]
+    assert cmd[cmd.index("-profile:v") + 1] == "baseline" and cmd[cmd.index("-bf") + 1] == "0"
+    tee = build_command("ffmpeg", Pipeline("test:", "other", 4, "https://h/whip/k", 0, preview=True))
+    target = f"[f=mpegts:bsfs/v=dump_extra:flush_packets=1:onfail=abort]{WHIP_PIPE}"
+    assert tee[-1] == f"{target}|[{PREVIEW_MP4}]pipe:1"
     assert redact_url("rtmp://u:pw@host:1935/live/stream-key") == "rtmp://host:1935/…"
     assert "stream-key" not in describe(cmd, "rtmp://h/live/k")
 

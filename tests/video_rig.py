@@ -5,19 +5,33 @@ aircraft has a test pattern and that camera as video sources."""
 from __future__ import annotations
 
 import contextlib
+import random
 import socket
 import subprocess
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from gateway.cli.run import SIM_AIRCRAFT_SN, simulated_settings, start_simulators
+from bench.partitions import NetnsGateway
+from gateway.cli.run import (
+    SIM_AIRCRAFT_SN,
+    SIM_GIMBAL_PAYLOAD_INDEX,
+    SIM_GIMBAL_SN,
+    simulated_settings,
+    start_simulators,
+)
 from gateway.local_broker import LocalBroker
 from gateway.settings import load_settings
+from tests.netlab import VethLink
 from tests.support import CloudClient, GatewayThread, wait_until
 
+if TYPE_CHECKING:
+    from tests.whip_receiver import WhipReceiver
+
 VIDEO = f"{SIM_AIRCRAFT_SN}/0-0-0/normal-0"  # the simulated aircraft's test pattern
+GIMBAL_VIDEO = f"{SIM_GIMBAL_SN}/{SIM_GIMBAL_PAYLOAD_INDEX}/normal-0"  # the gimbal's (a Rig with a link)
 CAMERA = f"{SIM_AIRCRAFT_SN}/0-0-1/normal-0"  # an "IP camera" (an ffmpeg serving H.264 over TCP)
 
 
@@ -154,21 +168,30 @@ class Camera:
 class Rig:
     """``run --simulate``'s gateway with its aircraft only, a cloud client, and a camera (not started)."""
 
-    def __init__(self, broker: LocalBroker, tmp: Path, camera_size: str = "640x360") -> None:
+    def __init__(
+        self, broker: LocalBroker, tmp: Path, camera_size: str = "640x360", *, link: VethLink | None = None
+    ) -> None:
+        """``link``: the gateway runs in that namespace (WHIP: WebRTC never on the host's interfaces) and
+        reaches ``broker`` at the veth's host end, where the broker must listen too."""
         self.tmp = tmp
         self.camera = Camera(free_port(), camera_size)
-        doc = simulated_settings({"broker": {"url": f"mqtt://127.0.0.1:{broker.port}"}, "osd_period": 1.0})
-        doc["devices"] = [d for d in doc["devices"] if d["type"] == "osdk"]
+        host = link.host_ip if link is not None else "127.0.0.1"
+        doc = simulated_settings({"broker": {"url": f"mqtt://{host}:{broker.port}"}, "osd_period": 1.0})
+        # in a namespace the gimbal (a virtual CAN bus: in-process, no address) stands in for the aircraft,
+        # whose simulator listens on the host's loopback, out of the namespace's reach; so does the camera
+        family = "osdk" if link is None else "rsdk"
+        doc["devices"] = [d for d in doc["devices"] if d["type"] == family]
         doc["metrics"] = {"enabled": True, "host": "127.0.0.1", "port": 0}  # the console's video preview
         doc["video"]["sources"] = [  # beside the aircraft's test pattern (video.test_pattern)
             {"sn": SIM_AIRCRAFT_SN, "camera_index": "0-0-1", "codec": "h264",
              "source": f"tcp://127.0.0.1:{self.camera.port}"},
-        ]  # fmt: skip
+        ] if link is None else []  # fmt: skip
         doc["video"].update(max_streams=2, backoff_initial=0.3, backoff_max=1.0, stall_timeout=3.0)
         self.sims: list[Any] = []
         self.settings = start_simulators(load_settings(None, **doc), self.sims)
         self.cloud = CloudClient(broker.host, broker.port, self.settings.gateway_sn)
-        self.gw = GatewayThread(self.settings).start()
+        gw = GatewayThread(self.settings) if link is None else NetnsGateway(self.settings, link.ns)
+        self.gw = gw.start()
         self.gw_state = f"{self.settings.gateway_sn}/state"
 
     def entry(self, video_id: str) -> dict[str, Any] | None:
@@ -238,3 +261,39 @@ class Rig:
         self.camera.kill()
         for sim in self.sims:
             sim.stop()
+
+
+@contextlib.contextmanager
+def whip_rig(tmp: Path, *, timecode: bool = False) -> Iterator[tuple[VethLink, Rig, WhipReceiver]]:
+    """A network namespace with ``run --simulate``'s gateway (its gimbal's test pattern: GIMBAL_VIDEO) and a
+    WHIP endpoint in it, a broker on the host listening on loopback and on the veth's host end, a cloud
+    on loopback. WebRTC's ICE offers every address but loopback's: in the namespace the veth's end is the
+    only one, so nothing reaches the host's real interfaces. The caller skips first where
+    ``netlab.netns_problem()`` says namespaces cannot be made. ``timecode``: the endpoint reads each
+    frame's drawn millisecond (glass to glass)."""
+    from tests.whip_receiver import WhipReceiver
+
+    with VethLink() as link:
+        port = free_port()
+        listeners = f"listener {port} 127.0.0.1\nlistener {port} {link.host_ip}"
+        broker = LocalBroker(port, listener_lines=listeners).start()
+        rig: Rig | None = None
+        rx: WhipReceiver | None = None
+        try:
+            rig = Rig(broker, tmp, link=link)
+            wait_until(lambda: rig.gw.app.devices.by_sn(SIM_GIMBAL_SN).online, 15, what="the gimbal online")
+            # a fresh namespace: every port in it is free
+            rx = WhipReceiver(link.gw_ip, random.randrange(20000, 60000), netns=link.ns, timecode=timecode)
+            yield link, rig, rx
+        finally:
+            if rx is not None:
+                rx.close()
+            if rig is not None:
+                rig.close()
+            broker.stop()
+
+
+def whip_start(rig: Rig, url: str, quality: int = 0) -> dict[str, Any]:
+    """``live_start_push`` of the gimbal's test pattern to a WHIP endpoint; the reply."""
+    body = {"url_type": 4, "url": url, "video_id": GIMBAL_VIDEO, "video_quality": quality}
+    return rig.cloud.service("live_start_push", body, timeout=15)

@@ -18,6 +18,7 @@ from urllib.parse import urlsplit
 __all__ = [
     "QUALITY",
     "TIMECODE_BITS",
+    "WHIP_PIPE",
     "Pipeline",
     "ProgressParser",
     "build_command",
@@ -53,7 +54,7 @@ class Pipeline:
 
     source: str  # a URL, /dev/videoN, or test:[pattern]
     source_codec: str  # "h264" or "other"
-    url_type: int  # 1 RTMP (the only one ffmpeg 5.1 can push here)
+    url_type: int  # 1 RTMP (ffmpeg pushes it), 4 WHIP (MPEG-TS to gateway/video/whip.py, which publishes it)
     url: str
     quality: int
     lens: str = "normal"
@@ -145,6 +146,9 @@ def _network_input(source: str) -> list[str]:
     return [*opts, "-i", source]
 
 
+#: Where a WHIP pipeline's ffmpeg writes its MPEG-TS: replaced by the publisher with the pipe it reads.
+WHIP_PIPE = "@whip-pipe@"
+
 #: The preview's fragments: one at least every 100 ms (each begins at a keyframe or not: MSE takes both).
 MP4_FLAGS = "frag_keyframe+empty_moov+default_base_moof"
 PREVIEW_MP4 = f"f=mp4:movflags={MP4_FLAGS}:frag_duration=100000:onfail=ignore"
@@ -185,6 +189,14 @@ def build_command(ffmpeg: str, p: Pipeline, progress_fd: int = 1) -> list[str]:
         cmd += ["-c:v", "libx264", "-preset", "ultrafast", "-tune", "zerolatency", "-profile:v", "baseline",
                 "-g", str(TEST_RATE), "-bf", "0", "-b:v", f"{kbps}k", "-maxrate", f"{kbps}k",
                 "-bufsize", f"{kbps // 2}k", "-threads", str(p.threads)]  # fmt: skip
+    if p.url_type == 4:  # WHIP: MPEG-TS on a pipe the publisher (gateway/video/whip.py) reads
+        # flush_packets: each packet leaves at once (the pipe's 32 kB buffer is ~130 ms of 2 Mbps video)
+        if not p.preview:
+            return [*cmd, "-flush_packets", "1", "-f", "mpegts", WHIP_PIPE]
+        cmd += ["-flags", "+global_header"]
+        # dump_extra: the SPS/PPS before every keyframe, in band, as a WebRTC receiver needs them
+        target = f"[f=mpegts:bsfs/v=dump_extra:flush_packets=1:onfail=abort]{WHIP_PIPE}"
+        return [*cmd, "-f", "tee", f"{target}|[{PREVIEW_MP4}]pipe:1"]
     flv = [*cmd, "-flvflags", "no_duration_filesize", "-f", "flv", p.url]
     if not p.preview:
         return flv

@@ -4,13 +4,15 @@ the supervised ffmpeg processes that carry the streams.
 Owns the configured video sources (``[video]``, :class:`gateway.settings.VideoSettings`), one
 :class:`~gateway.video.machine.StreamMachine` per ``video_id`` (every decision: start, retry with backoff,
 stall, stop), and the thin transport that carries the machines' actions out: one asyncio subprocess per
-pipeline (``nice`` + ``prlimit --as``: bounded CPU priority and memory), its ``-progress`` lines read as they
+pipeline (``nice`` + ``prlimit --as``: bounded CPU priority and memory; for WHIP the publisher
+``python -m gateway.video.whip`` with the ffmpeg as its child), its ``-progress`` lines read as they
 come (never blocking the loop), SIGTERM then SIGKILL to stop it. Publishes the gateway's state through a
 callback (``live_capacity`` on connect, ``live_status`` on every change). Knows nothing about MQTT topics,
 envelopes or the dispatcher's rules; knows devices only as the :class:`~gateway.devices.DeviceTable`
 says whether they are online (a stream stops when its device goes offline).
 
-Answers (docs/video.md has the table): unknown ``video_id`` 399012; url types other than RTMP 399010;
+Answers (docs/video.md has the table): unknown ``video_id`` 399012; url types other than RTMP and WHIP
+399010 (WHIP too when aiortc is not installed: the ``webrtc`` extra);
 a second start of a running video to the same target 0 (its quality applied), to another target 399011;
 a stop of a video that is not streaming 0; a start whose pipeline died before its first frame 399015.
 """
@@ -19,9 +21,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import importlib.util
 import logging
 import os
 import shutil
+import sys
 import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -53,9 +57,20 @@ _REFUSED_TYPES = {
     UrlType.AGORA: "Agora needs Agora's proprietary SDK: not supported (use RTMP, url_type 1)",
     UrlType.RTSP: "RTSP (the gateway as an RTSP server) is not supported (use RTMP, url_type 1)",
     UrlType.GB28181: "GB28181 has no maintained library here: not supported (use RTMP, url_type 1)",
-    UrlType.WHIP: "WebRTC (WHIP) needs an engine Debian 12 lacks (ffmpeg 5.1 has no WHIP muxer, "
-    "GStreamer's whipsink is not packaged): not supported (use RTMP, url_type 1)",
 }
+#: url_type → the schemes its url may have
+_SCHEMES = {UrlType.RTMP: ("rtmp://", "rtmps://"), UrlType.WHIP: ("http://", "https://")}
+_SCHEME_ERROR = {
+    UrlType.RTMP: "an RTMP url starts with rtmp:// or rtmps://",
+    UrlType.WHIP: "a WHIP url is the endpoint's http:// or https:// URL",
+}
+
+
+def _whip_missing() -> str | None:
+    """Why WHIP cannot run here (None when it can): aiortc (PyAV with it) is the ``webrtc`` extra."""
+    if importlib.util.find_spec("aiortc") is None:
+        return "WebRTC (WHIP) needs aiortc: pip install 'dji-gateway[webrtc]' (or use RTMP, url_type 1)"
+    return None
 
 
 @dataclass
@@ -193,9 +208,12 @@ class LiveService:
         url_type = UrlType(data.url_type)
         if url_type in _REFUSED_TYPES:
             return ResultCode.LIVE_URL_TYPE_UNSUPPORTED, {"reason": _REFUSED_TYPES[url_type]}
+        missing = _whip_missing() if url_type is UrlType.WHIP else None
+        if missing is not None:
+            return ResultCode.LIVE_URL_TYPE_UNSUPPORTED, {"reason": missing}
         url = data.url.get_secret_value().strip()
-        if not url.lower().startswith(("rtmp://", "rtmps://")):
-            return ResultCode.INVALID_PARAMETERS, {"reason": "an RTMP url starts with rtmp:// or rtmps://"}
+        if not url.lower().startswith(_SCHEMES[url_type]):
+            return ResultCode.INVALID_PARAMETERS, {"reason": _SCHEME_ERROR[url_type]}
         adapter = self.devices.by_sn(video.source.sn)
         if adapter is None or not adapter.online:
             return ResultCode.DEVICE_NOT_CONNECTED, {"reason": f"device {video.source.sn} is not connected"}
@@ -337,7 +355,11 @@ class LiveService:
                 preview = video.preview
 
             def build(progress_fd: int, p: Pipeline = pipeline, vid: str = vid, gen: int = gen) -> list[str]:
-                cmd = self._wrapper + build_command(self.settings.ffmpeg, p, progress_fd)
+                cmd = build_command(self.settings.ffmpeg, p, progress_fd)
+                if p.url_type == UrlType.WHIP:  # the publisher runs the ffmpeg and sends what it encodes
+                    ice = [arg for server in self.settings.ice_servers for arg in ("--ice-server", server)]
+                    cmd = [sys.executable, "-m", "gateway.video.whip", "--url", p.url, *ice, "--", *cmd]
+                cmd = self._wrapper + cmd
                 log.debug("pipeline %s #%d: %s", vid, gen, describe(cmd, p.url))
                 return cmd
 
