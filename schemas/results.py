@@ -17,8 +17,9 @@ Codes this project reserves (DJI's catalogue does not use the 399xxx block or 59
   and stopped (killed) before keeping its reply: not acted on again, since whether the device acted is
   unknown; the cloud reads the device's state (docs/brokers.md, "Exactly once across restarts").
 - 399010..399016: live streaming (``live_*``, docs/video.md): 399010 ``LIVE_URL_TYPE_UNSUPPORTED`` (Agora,
-  RTSP, GB28181: no maintained engine here; WHIP without aiortc, the ``webrtc`` extra), 399011 ``LIVE_ALREADY_STREAMING`` (this video already
-  streams to another target), 399012 ``LIVE_UNKNOWN_VIDEO`` (no configured source for this video id),
+  RTSP, GB28181: no maintained engine here; WHIP without aiortc, the ``webrtc`` extra), 399011
+  ``LIVE_ALREADY_STREAMING`` (this video already streams to another target), 399012 ``LIVE_UNKNOWN_VIDEO``
+  (no configured source for this video id),
   399013 ``LIVE_LENS_UNAVAILABLE``, 399014 ``LIVE_NOT_STREAMING``, 399015 ``LIVE_START_FAILED`` (the media
   engine could not start or lost the source; also ``live_status.error_status``), 399016 ``LIVE_TOO_MANY``.
 - 599001 ``INTERNAL_ERROR``: the gateway failed (a bug or an unexpected exception); never a device error.
