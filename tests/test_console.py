@@ -205,6 +205,9 @@ def test_send_drives_a_drc_session(rig: dict[str, Any], capsys: pytest.CaptureFi
         "osd_frequency=5",
         "hsi_frequency=1",
     ]
+    # before live control: a stick reaches no session, and send says so instead of exiting 0
+    code, out, err = _send(capsys, url, "--drc", "stick_control", "seq=1", "yaw=1354")
+    assert code == 3 and "reached no live-control session" in err and "nothing moved" in err, (code, err)
     assert _send(capsys, url, "drc_mode_enter", *enter)[0] == 0
     code, out, _ = _send(capsys, url, "--drc", "heart_beat", "seq=7", "timestamp=1700000000000")
     assert code == 0 and json.loads(out)["data"] == {"seq": 7, "timestamp": 1700000000000}
@@ -214,6 +217,9 @@ def test_send_drives_a_drc_session(rig: dict[str, Any], capsys: pytest.CaptureFi
     assert _send(capsys, url, "--drc", "drone_control", "seq=2", "w=5")[0] == 0
     code, out, _ = _send(capsys, url, "--drc", "drone_control", "seq=2", "w=6", "--timeout", "0.3")
     assert code == 3  # a repeated seq is ignored by the gateway (clouds repeat DRC messages): no answer
+    # in live control on this broker: an accepted stick (not answered) is reported as reaching it
+    code, out, _ = _send(capsys, url, "--drc", "stick_control", "seq=3", "yaw=1354")
+    assert code == 0 and "rides this broker" in out, out
     assert _send(capsys, url, "drc_mode_exit")[0] == 0
 
 

@@ -2,7 +2,9 @@
 
 ``send`` publishes one service (or one ``drc/down`` message) through the broker, waits for the reply
 that matches its ``tid`` and ``bid`` (``drc/up``: its method and ``seq``), prints it and exits 0 on
-result 0, 1 on an error result, 3 when nothing came back in time, 2 when the broker could not be used.
+result 0, 1 on an error result, 3 when nothing came back in time, 2 when the broker could not be used
+(``stick_control``, not answered when accepted: 0 when no refusal comes and the gateway's live-control
+pushes arrive on that drc/up, proof its session rides this broker; 3 when they do not: nothing moved).
 ``monitor`` subscribes to one gateway's topics and shows topology, osd, state, events, replies and the
 live-control (DRC) session: heartbeat round trip as seen on the broker, the last sticks, failsafes.
 It draws a ``rich`` view on a terminal and prints one line per message otherwise (``--plain``, or
@@ -65,6 +67,11 @@ GATEWAY_ENV = "DJIGW_GATEWAY_SN"
 EXIT_OK, EXIT_ERROR_RESULT, EXIT_USAGE, EXIT_TIMEOUT = 0, 1, 2, 3
 #: how long ``send --drc`` waits for the refusal of a method that is not answered when accepted (s)
 SILENT_WAIT = 1.0
+#: and, longer, for the gateway's live-control pushes on the same drc/up (the proof that a session rides
+#: this broker, so the accepted message reached it): ``delay_info_push`` comes once a second at least
+DRC_PROOF_WAIT = 2.5
+#: what a gateway in live control publishes on drc/up by itself, unasked
+DRC_PUSHES = frozenset({"osd_info_push", "hsi_info_push", "delay_info_push", "drc_drone_state_push"})
 
 #: osd fields shown first (and always, when present) in a device's one-line summary.
 _OSD_FIRST = (
@@ -98,7 +105,8 @@ def add_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
         action="store_true",
         help="publish on drc/down instead (heart_beat, drone_control, stick_control, drone_emergency_stop, "
         "drc_gimbal_reset) and wait for the drc/up answer with the same method and seq (stick_control: "
-        "1 s for a refusal, accepted ones are not answered)",
+        "1 s for a refusal, accepted ones are not answered: exit 0 when the gateway's live-control pushes "
+        "arrive on this broker's drc/up, 3 when none does: nothing moved)",
     )
     send.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the reply (10)")
     send.add_argument(
@@ -430,6 +438,7 @@ def _send(ns: argparse.Namespace) -> int:
 
     found: list[dict[str, Any]] = []
     arrived = threading.Event()
+    pushing = threading.Event()  # the gateway's live-control pushes seen on this drc/up
     seen = GatewaysSeen()
 
     def on_message(topic: str, payload: bytes) -> None:
@@ -440,6 +449,8 @@ def _send(ns: argparse.Namespace) -> int:
             reply = json.loads(payload)
         except ValueError:
             return
+        if isinstance(reply, dict) and reply.get("method") in DRC_PUSHES:
+            pushing.set()
         if isinstance(reply, dict) and matches(reply) and not arrived.is_set():
             found.append(reply)
             arrived.set()
@@ -456,12 +467,27 @@ def _send(ns: argparse.Namespace) -> int:
         link.publish(request_topic, body, qos=0 if ns.drc else 1)
         wait = min(ns.timeout, SILENT_WAIT)
         if silent and not arrived.wait(wait):
-            print(
-                f"sent {ns.method}: not refused within {wait:g}s (an accepted one is not answered; it moves "
-                "nothing unless live control rides this broker: the monitor's DRC panel or "
-                "`dji-gateway status` shows drc_state 2)"
-            )
-            return EXIT_OK
+            # no refusal: accepted, if the gateway's live-control session rides this broker at all (else
+            # nobody read it); its unasked pushes on this drc/up say so
+            deadline = time.monotonic() + max(0.0, min(ns.timeout, DRC_PROOF_WAIT) - wait)
+            while not (pushing.is_set() or arrived.is_set()) and time.monotonic() < deadline:
+                pushing.wait(0.05)
+            if not arrived.is_set():
+                if pushing.is_set():
+                    print(
+                        f"sent {ns.method}: not refused within {wait:g}s, and {gw}'s live-control session "
+                        "rides this broker (its drc/up pushes arrive): accepted (an accepted one is not "
+                        "answered)"
+                    )
+                    return EXIT_OK
+                print(
+                    f"dji-gateway send: {ns.method} reached no live-control session: {gw} publishes nothing "
+                    f"on drc/up of {link.settings.host}:{link.settings.port} (within "
+                    f"{min(ns.timeout, DRC_PROOF_WAIT):g}s), so nothing moved; enter live control with "
+                    "drc_mode_enter naming this broker (mqtt_broker.address), or send to the broker it named",
+                    file=sys.stderr,
+                )
+                return EXIT_TIMEOUT
         if not arrived.wait(ns.timeout):
             print(
                 f"dji-gateway send: no reply to {ns.method} from {gw} within {ns.timeout:g}s; "
