@@ -315,7 +315,10 @@ def test_make_run_installs_the_runtime_only_and_make_test_the_dev_extras(tmp_pat
         assert done.returncode == 0, done.stderr
         return [ln for ln in done.stdout.splitlines() if "pip install" in ln and "--upgrade pip" not in ln]
 
-    assert [ln.split("pip install", 1)[1].split() for ln in pip_lines("run")] == [["--quiet", "-e", "."]]
+    # the runtime and its webrtc extra (WHIP live video: aiortc), nothing of the dev extras
+    assert [ln.split("pip install", 1)[1].split() for ln in pip_lines("run")] == [
+        ["--quiet", "-e", "'.[webrtc]'"]
+    ]
     assert any("'.[dev]'" in ln for ln in pip_lines("test"))
     assert not any("[dev]" in ln for ln in pip_lines("run"))
     assert (

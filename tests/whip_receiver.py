@@ -41,7 +41,7 @@ def _latency_ms(frame: Any) -> float:
 
 @dataclass
 class Session:
-    pc: RTCPeerConnection
+    pc: Any  # aiortc's RTCPeerConnection, or the Chromium page that holds the peer connection
     offer: str
     sid: str = field(default_factory=lambda: uuid.uuid4().hex[:12])
     frames: int = 0
@@ -114,7 +114,7 @@ class WhipReceiver:
             await self._stop.wait()
         finally:
             for s in self.sessions:
-                await s.pc.close()
+                await self._close(s)
             await runner.cleanup()
 
     async def _offer(self, request: web.Request) -> web.Response:
@@ -123,7 +123,14 @@ class WhipReceiver:
             return web.Response(status=self.status, text="refused by the test")
         if request.content_type != "application/sdp":
             return web.Response(status=415, text="application/sdp expected")
-        offer = await request.text()
+        session, answer = await self._answer(await request.text())
+        location = f"/whip/{request.match_info['name']}/{session.sid}"
+        return web.Response(
+            status=201, text=answer, content_type="application/sdp", headers={"Location": location}
+        )
+
+    async def _answer(self, offer: str) -> tuple[Session, str]:
+        """A session for ``offer`` and the SDP answer (aiortc here; :class:`ChromiumWhipReceiver`)."""
         pc = RTCPeerConnection(RTCConfiguration(iceServers=[]))
         session = Session(pc, offer)
         self.sessions.append(session)
@@ -137,11 +144,7 @@ class WhipReceiver:
         for t in pc.getTransceivers():
             if t.receiver and t._codecs:  # the negotiated codec (aiortc keeps it on the transceiver)
                 session.codec = t._codecs[0].mimeType
-        location = f"/whip/{request.match_info['name']}/{session.sid}"
-        return web.Response(
-            status=201, text=pc.localDescription.sdp, content_type="application/sdp",
-            headers={"Location": location},
-        )  # fmt: skip
+        return session, str(pc.localDescription.sdp)
 
     async def _consume(self, session: Session, track: Any) -> None:
         try:
@@ -163,17 +166,117 @@ class WhipReceiver:
         for s in self.sessions:
             if s.sid == sid:
                 s.deleted = True
-                await s.pc.close()
+                await self._close(s)
                 return web.Response(status=200)
         return web.Response(status=404)
+
+    async def _close(self, session: Session) -> None:
+        await session.pc.close()
 
     def drop(self, session: Session) -> None:
         """The endpoint ends ``session`` by itself (its peer connection closed, no DELETE asked)."""
         assert self._loop is not None
-        asyncio.run_coroutine_threadsafe(session.pc.close(), self._loop).result(10)
+        asyncio.run_coroutine_threadsafe(self._close(session), self._loop).result(10)
 
     def close(self) -> None:
         if self._loop is not None and self._stop is not None:
             with contextlib.suppress(RuntimeError):
                 self._loop.call_soon_threadsafe(self._stop.set)
         self._thread.join(10)
+
+
+#: In the page: take the offer, answer it, wait for every candidate, return the answer's SDP.
+_JS_ANSWER = """async (offer) => {
+  const pc = new RTCPeerConnection({iceServers: []});
+  window.pc = pc;
+  pc.ontrack = (e) => {
+    const v = document.createElement('video');
+    v.muted = true; v.autoplay = true; v.srcObject = new MediaStream([e.track]);
+    document.body.appendChild(v); v.play().catch(() => {});
+  };
+  await pc.setRemoteDescription({type: 'offer', sdp: offer});
+  await pc.setLocalDescription(await pc.createAnswer());
+  if (pc.iceGatheringState !== 'complete') {
+    await new Promise((done) => pc.addEventListener('icegatheringstatechange',
+      () => pc.iceGatheringState === 'complete' && done()));
+  }
+  return pc.localDescription.sdp;
+}"""
+#: In the page: what the browser's WebRTC says of the video it receives.
+_JS_STATS = """async () => {
+  const out = {state: window.pc.connectionState, frames: 0, w: 0, h: 0, codec: ''};
+  const stats = await window.pc.getStats();
+  for (const r of stats.values()) {
+    if (r.type === 'inbound-rtp' && r.kind === 'video') {
+      Object.assign(out, {frames: r.framesDecoded || 0, w: r.frameWidth || 0, h: r.frameHeight || 0});
+      const codec = r.codecId && stats.get(r.codecId);
+      if (codec) out.codec = codec.mimeType + ' ' + (codec.sdpFmtpLine || '');
+    }
+  }
+  return out;
+}"""
+
+
+class ChromiumWhipReceiver(WhipReceiver):
+    """The same endpoint with Debian's Chromium (libwebrtc, through Playwright) as the peer: a page per
+    session answers the offer and decodes the video; its ``getStats`` (frames decoded, size, codec) are
+    read every 0.1 s into the session. Another WebRTC implementation than the publisher's aiortc: what
+    both misread alike would pass an aiortc endpoint, not this one. Chromium runs in the namespace too
+    (launched from the receiver's thread), with mDNS host-candidate hiding off (no multicast)."""
+
+    ARGS = ("--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking",
+            "--disable-component-update", "--disable-sync",
+            "--disable-features=WebRtcHideLocalIpsWithMdns")  # fmt: skip
+
+    def __init__(self, host: str, port: int, *, netns: str | None = None, chromium: str) -> None:
+        self.chromium = chromium
+        self._browser: Any = None
+        super().__init__(host, port, netns=netns)
+
+    async def _serve(self) -> None:
+        from playwright.async_api import async_playwright
+
+        async with async_playwright() as pw:
+            self._browser = await pw.chromium.launch(
+                executable_path=self.chromium, headless=True, args=list(self.ARGS)
+            )
+            try:
+                await super()._serve()
+            finally:
+                await self._browser.close()
+
+    async def _answer(self, offer: str) -> tuple[Session, str]:
+        page = await self._browser.new_page()
+        session = Session(page, offer)
+        self.sessions.append(session)
+        answer = await page.evaluate(_JS_ANSWER, offer)
+        self._tasks.add(asyncio.ensure_future(self._watch(session)))
+        return session, str(answer)
+
+    async def _watch(self, session: Session) -> None:
+        page = session.pc
+        while session.ended_at is None:
+            try:
+                stats = await page.evaluate(_JS_STATS)
+            except Exception:  # the page closed: the session is over
+                break
+            if stats["frames"] and session.first_frame_at is None:
+                session.first_frame_at = time.monotonic()
+            session.frames = int(stats["frames"])
+            if stats["w"]:
+                session.sizes.add((int(stats["w"]), int(stats["h"])))
+            session.codec = str(stats["codec"])
+            if stats["state"] in ("failed", "closed"):
+                break
+            await asyncio.sleep(0.1)
+        if session.ended_at is None:
+            session.ended_at = time.monotonic()
+
+    async def _close(self, session: Session) -> None:
+        page = session.pc
+        with contextlib.suppress(Exception):
+            await page.evaluate("() => window.pc && window.pc.close()")
+        if session.ended_at is None:
+            session.ended_at = time.monotonic()
+        with contextlib.suppress(Exception):
+            await page.close()

@@ -227,20 +227,23 @@ class Publisher:
             transport.close()
 
     async def _teardown(self, pc: RTCPeerConnection) -> None:
+        """The session DELETEd first (the endpoint frees it now, not at its ICE timeout; the supervisor's
+        SIGKILL comes KILL_GRACE, 1.5 s, after its SIGTERM), then the peer connection and ffmpeg."""
+        if self.resource is not None:
+            with contextlib.suppress(aiohttp.ClientError, TimeoutError):
+                async with asyncio.timeout(1.0), aiohttp.ClientSession() as http:
+                    await http.delete(self.resource)
         if self.proc is not None and self.proc.returncode is None:
             with contextlib.suppress(ProcessLookupError):
                 self.proc.send_signal(signal.SIGTERM)
+        await pc.close()
+        if self.proc is not None and self.proc.returncode is None:
             try:
-                async with asyncio.timeout(1.0):
+                async with asyncio.timeout(0.3):
                     await self.proc.wait()
             except TimeoutError:
                 with contextlib.suppress(ProcessLookupError):
                     self.proc.kill()
-        if self.resource is not None:  # the endpoint frees the session now, not at its ICE timeout
-            with contextlib.suppress(aiohttp.ClientError, TimeoutError):
-                async with asyncio.timeout(2.0), aiohttp.ClientSession() as http:
-                    await http.delete(self.resource)
-        await pc.close()
 
 
 async def _first(*waits: Any) -> None:
