@@ -258,7 +258,46 @@ def run(cfg: Config) -> list[Row]:
     for i, (where, samples) in enumerate(placements.items()):
         rows += _rows(where, samples, n, first=i == 0)
     rows.append(_after_idle(100 if cfg.quick else 1000))
+    rows += _store(100 if cfg.quick else 2000)
     return rows
+
+
+def _store(n: int) -> list[Row]:
+    """What the reply journal adds to a request when the gateway has a ``state_dir`` (the rows above run
+    without one: the store in memory): the store alone, on a directory in this machine's temp dir, the
+    three writes interleaved so each sees the same disk. A read's reply is committed without waiting for
+    the disk (``durable=False``); the baseline is the same write waiting for it, as every reply did before;
+    a request with a visible effect pays a started mark and its reply, both waited for."""
+    from gateway.store import StateStore
+
+    payload = json.dumps({"tid": "t", "data": {"result": 0, "output": {"version": "01.02.03.04"}}}).encode()
+    read, read_waited, action = [], [], []
+    with tempfile.TemporaryDirectory(prefix="bench-store-") as where:
+        store = StateStore(Path(where))
+        try:
+            for i in range(n):
+                t0 = time.perf_counter()
+                store.reply_recorded(f"read-{i}", payload, durable=False)
+                t1 = time.perf_counter()
+                store.reply_recorded(f"waited-{i}", payload)
+                t2 = time.perf_counter()
+                store.request_started(f"act-{i}", "camera_photo_take")
+                store.reply_recorded(f"act-{i}", payload)
+                t3 = time.perf_counter()
+                read.append((t1 - t0) * 1e6)
+                read_waited.append((t2 - t1) * 1e6)
+                action.append((t3 - t2) * 1e6)
+        finally:
+            store.close()
+    return [
+        Row(group="e2e", case="state store: a read's reply kept, p50", count=n, rate=statistics.median(read),
+            base_rate=statistics.median(read_waited), base_count=n, unit="us",
+            note="committed without waiting for the disk (outlives a killed process, not a power cut); "
+            "baseline: the same write waiting for it (fsync), as before"),
+        Row(group="e2e", case="state store: an action's started mark + reply, p50", count=n,
+            rate=statistics.median(action), unit="us",
+            note="two writes waited for: exactly once across a kill (issue #34)"),
+    ]  # fmt: skip
 
 
 def _after_idle(n: int, idle: float = 0.001) -> Row:

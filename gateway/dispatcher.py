@@ -131,7 +131,7 @@ class ReplyJournal(Protocol):
     """Where replies outlive the process (:class:`gateway.store.StateStore`): a request resent with the
     same tid after a restart is answered from here, not acted on again."""
 
-    def reply_recorded(self, tid: str, payload: bytes) -> None: ...
+    def reply_recorded(self, tid: str, payload: bytes, *, durable: bool = True) -> None: ...
 
     def recorded_reply(self, tid: str, max_age_ms: int) -> bytes | None: ...
 
@@ -378,8 +378,8 @@ class Dispatcher:
             audit("service", method=request.method, tid=tid, bid=request.bid, source=source,
                   result=int(result), device=device)  # fmt: skip
         if self.journal is not None:  # before publishing: a crash after this point still knows it acted
-            try:
-                self.journal.reply_recorded(tid, raw)
+            try:  # a read's reply is kept without waiting for the disk (a read again changes nothing)
+                self.journal.reply_recorded(tid, raw, durable=audited(request.method))
             except Exception:  # a full disk must not cost the reply
                 self.metrics.inc("handler_exceptions_total", where="reply_journal")
                 log.exception("could not keep the reply to %s in the state store", tid)

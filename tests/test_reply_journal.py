@@ -24,7 +24,7 @@ from gateway.metrics import Metrics
 from gateway.settings import DispatcherSettings
 from gateway.store import StateStore
 from schemas import TopicKind, topic
-from tests.support import CloudClient, GatewayThread, gateway_settings, wait_until
+from tests.support import CloudClient, FakeAdapter, GatewayThread, gateway_settings, wait_until
 from tests.test_dispatcher_limits import Recorder, SlowAdapter
 
 GW = "GW-ONCE-1"
@@ -178,5 +178,46 @@ def test_the_started_mark_goes_with_the_reply_and_ages_out(tmp_path: Path) -> No
         assert [r["data"]["result"] for r in out.replies] == [0, 0]
         assert store.started_request("photo-2", 10**9) is None  # answered: no mark left
         store.close()
+
+    asyncio.run(scenario())
+
+
+class _Durability(StateStore):
+    """The real store, noting how each reply was kept (a spy on our own class, not a library's)."""
+
+    def __init__(self, directory: Path, clock: ManualClock) -> None:
+        super().__init__(directory, now_ms=clock.time_ms)
+        self.kept: dict[str, bool] = {}
+
+    def reply_recorded(self, tid: str, payload: bytes, *, durable: bool = True) -> None:
+        self.kept[tid] = durable
+        super().reply_recorded(tid, payload, durable=durable)
+
+
+def test_a_reads_reply_is_kept_without_waiting_for_the_disk_an_actions_with(tmp_path: Path) -> None:
+    """A read (``*_get``) changes nothing, so its reply is committed without the fsync (it still outlives a
+    killed process: tests/test_store.py); a request with a visible effect waits for the disk."""
+
+    async def scenario() -> None:
+        clock = ManualClock()
+        store = _Durability(tmp_path, clock)
+        adapter = FakeAdapter("READ-1", "39-0-7", {"x_rsdk_version_get": FakeAdapter.ok,
+                                                    "camera_mode_switch": FakeAdapter.ok})  # fmt: skip
+        devices = DeviceTable([adapter])
+        devices.authority.payloads.add("39-0-7")
+        out = Recorder()
+        d = Dispatcher(gateway_sn=GW, registry=build_registry(), devices=devices, outbox=out,
+                       settings=DispatcherSettings(request_timeout=2.0), clock=clock, metrics=Metrics(),
+                       journal=store)  # fmt: skip
+        services = topic(TopicKind.SERVICES, GW)
+        await d.handle(services, _request("read-1", "x_rsdk_version_get"))
+        await d.handle(services, _request("mode-1", "camera_mode_switch", camera_mode=1))
+        assert [r["data"]["result"] for r in out.replies] == [0, 0], out.replies
+        assert store.kept == {"read-1": False, "mode-1": True}
+        store.close()
+        again = StateStore(tmp_path, now_ms=clock.time_ms)  # both kept, whatever the wait
+        assert again.recorded_reply("read-1", 10**9) is not None
+        assert again.recorded_reply("mode-1", 10**9) is not None
+        again.close()
 
     asyncio.run(scenario())

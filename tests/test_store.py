@@ -114,6 +114,32 @@ def test_a_reply_outlives_the_store_and_ages_out(tmp_path: Path) -> None:
     again.close()
 
 
+_READ_WRITER = """
+import os, signal, sys
+from pathlib import Path
+from gateway.store import StateStore
+store = StateStore(Path(sys.argv[1]))
+store.reply_recorded("read-1", b"a read's reply", durable=False)
+store.reply_recorded("action-1", b"an action's reply")
+os.kill(os.getpid(), signal.SIGKILL)  # no close, no checkpoint: the process dies right here
+"""
+
+
+def test_a_reads_reply_kept_without_waiting_for_the_disk_outlives_a_killed_process(tmp_path: Path) -> None:
+    """``durable=False`` skips the fsync, never the write: a gateway killed after answering a read still
+    answers its resend from the journal (only a power cut may lose it; then it is read again)."""
+    done = subprocess.run([sys.executable, "-c", _READ_WRITER, str(tmp_path)], timeout=30)
+    assert done.returncode == -signal.SIGKILL
+    store = StateStore(tmp_path)
+    assert store.recorded_reply("read-1", 60_000) == b"a read's reply"
+    assert store.recorded_reply("action-1", 60_000) == b"an action's reply"
+    # the connection waits for the disk again after a read's reply: the next write with a visible effect
+    # (a started mark, a task) is as durable as ever
+    store.reply_recorded("read-2", b"x", durable=False)
+    assert store._db.execute("PRAGMA synchronous").fetchone() == (2,)  # FULL
+    store.close()
+
+
 def test_the_reply_journal_is_bounded_by_count_and_age(tmp_path: Path) -> None:
     now = [0]
     store = StateStore(tmp_path, now_ms=lambda: now[0])
