@@ -39,8 +39,10 @@ class PipelineProcess:
         on_progress: Callable[[int], None],
         on_exit: Callable[[str], None],
         preview: PreviewFeed | None = None,
+        name: str = "ffmpeg",
     ) -> None:
         self.build = build  # progress fd → the command line
+        self.name = name  # what the failure's reason calls the process (the WHIP publisher for url_type 4)
         self.cmd: list[str] = []
         self.secret = secret
         self.on_progress = on_progress
@@ -76,7 +78,7 @@ class PipelineProcess:
             await asyncio.gather(self._read_progress(progress), self._read_errors(), self._read_preview())
             code = await self.proc.wait()
             last = self.errors[-1] if self.errors else ""
-            reason = f"ffmpeg exited {code}" + (f": {last}" if last else "")
+            reason = f"{self.name} exited {code}" + (f": {last}" if last else "")
         except FileNotFoundError:
             reason = f"{self.cmd[0]} not found (apt-get install ffmpeg)"
         except OSError as exc:

@@ -363,7 +363,9 @@ class LiveService:
                 log.debug("pipeline %s #%d: %s", vid, gen, describe(cmd, p.url))
                 return cmd
 
-            proc = PipelineProcess(build, target.url, *self._callbacks(video, gen), preview=preview)
+            name = "the WHIP publisher" if target.url_type == UrlType.WHIP else "ffmpeg"
+            callbacks = self._callbacks(video, gen)
+            proc = PipelineProcess(build, target.url, *callbacks, preview=preview, name=name)
             self._procs[(vid, gen)] = proc
             proc.start()
 
