@@ -7,7 +7,7 @@ Against one private mosquitto on loopback, in the same run:
   DRC on the same broker) applies it and the simulated R SDK gimbal's CAN bus carries the speed
   command; a python-can listener on that bus timestamps the first frame with the new set-point;
 * **heartbeat echo**: ``heart_beat`` → ``drc/up`` echo while a 20 Hz stick stream runs; every
-  heartbeat must be echoed (misses are counted and must be zero).
+  heartbeat must be echoed within the heartbeat failsafe's 3 s (misses are counted and must be zero).
 
 Targets from the issue: stick-to-wire p99 ≤ the echo's p99 + 2 ms; zero missed echoes in 10,000.
 
@@ -99,6 +99,12 @@ def _echo_baseline(port: int, n: int, period: float = 0.0) -> list[float]:
         c.disconnect()
         c.loop_stop()
     return samples
+
+
+#: An echo is missed when it has not come within the heartbeat failsafe's default (``drc.heartbeat_timeout``,
+#: 3 s): later than that, the session would have ended; earlier, it was echoed, and its delay is in the RTT
+#: rows (1 s here once counted a late echo as lost: make test's smoke run, on a loaded CI machine).
+ECHO_DEADLINE = 3.0
 
 
 def run(cfg: Config) -> list[Row]:
@@ -215,7 +221,7 @@ def run(cfg: Config) -> list[Row]:
             cloud.publish(
                 down, json.dumps({"method": "heart_beat", "data": {"seq": i, "timestamp": ts}}), qos=0
             )
-            if waiter.event.wait(1.0) and waiter.lost is None:
+            if waiter.event.wait(ECHO_DEADLINE) and waiter.lost is None:
                 beat_ms.append((time.perf_counter() - t0) * 1000)
             else:
                 waiter.check("the heartbeat run")
@@ -272,7 +278,8 @@ def run(cfg: Config) -> list[Row]:
             count=n_beats,
             rate=float(missed),
             unit="missed",
-            note=f"failsafe stops during the run: {failsafes:.0f}",
+            note=f"not echoed within {ECHO_DEADLINE:g} s (the heartbeat failsafe's default); "
+            f"failsafe stops during the run: {failsafes:.0f}",
         )
     )
     if missed:

@@ -116,6 +116,28 @@ def gateway() -> Iterator[dict[str, Any]]:
 FIRST_DRAW_MS = 20_000
 
 
+def _device_row(
+    page: Any, gateway: dict[str, Any], sn: str, attrs: str = "", timeout: int = FIRST_DRAW_MS
+) -> None:
+    """Wait for the device table's row of ``sn`` (``attrs``: more attribute selectors, e.g. online). On a
+    timeout the failure says what the page showed (its link pill, greyed or not, every row's online and
+    freshness) and the gateway's last log lines: twice a page had no row in time and nothing said why."""
+    selector = f'#device-table tr[data-sn="{sn}"]{attrs}'
+    try:
+        page.wait_for_selector(selector, timeout=timeout)
+    except Exception as exc:
+        shown = page.evaluate(
+            """() => ({link: (document.querySelector('#link-state') || {}).textContent,
+                       gone: document.body.classList.contains('gone'),
+                       rows: [...document.querySelectorAll('#device-table tbody tr')]
+                         .map((r) => [r.dataset.sn, r.dataset.online, r.dataset.fresh])})"""
+        )
+        tail = "\n".join(gateway["proc"].output().splitlines()[-30:])
+        raise AssertionError(
+            f"no {selector} after {timeout} ms; the page shows {shown}; the gateway's last lines:\n{tail}"
+        ) from exc
+
+
 def _shots(tmp_path: Path) -> Path:
     where = os.environ.get("DJIGW_SCREENSHOTS")
     path = Path(where) if where else tmp_path
@@ -138,7 +160,7 @@ def test_the_page_shows_the_simulated_devices_within_8_s(
         started = time.monotonic()
         page.goto(gateway["url"] + "/")
         for sn in ("RSDK-SIM-0001", "OSDK-SIM-0001", "RM-SIM-0001"):
-            page.wait_for_selector(f'#device-table tr[data-sn="{sn}"][data-online="true"]', timeout=8000)
+            _device_row(page, gateway, sn, '[data-online="true"]', timeout=8000)
         # the map, the field and the instruments are drawn (SVG), the DRC chart too (canvas)
         page.wait_for_selector("#map-svg .aircraft-mark", timeout=8000)
         page.wait_for_selector("#field-svg circle.robot", timeout=8000)
@@ -242,7 +264,7 @@ def test_the_readme_walkthrough_in_the_page(chromium: Any, gateway: dict[str, An
     stoppers: list[Any] = []
     try:
         page.goto(url + "/")
-        page.wait_for_selector('#device-table tr[data-sn="OSDK-SIM-0001"][data-online="true"]', timeout=10000)
+        _device_row(page, gateway, "OSDK-SIM-0001", '[data-online="true"]')
         # the inspector watches the gimbal's CAN link from the start
         page.select_option("#frame-link", "RSDK-SIM-0001")
 
@@ -446,7 +468,7 @@ def test_fly_from_the_page_with_the_keyboard_and_its_dead_man(chromium: Any, gat
     try:
         _airborne(cloud)
         page.goto(gateway["url"] + "/")
-        page.wait_for_selector('#device-table tr[data-sn="OSDK-SIM-0001"][data-online="true"]', timeout=10000)
+        _device_row(page, gateway, "OSDK-SIM-0001", '[data-online="true"]')
         _sign_in(page)
         page.click("#pilot-take")
         page.wait_for_selector("#confirm[open]", timeout=5000)
@@ -541,7 +563,7 @@ def test_fly_from_the_page_with_a_gamepad_and_its_dead_man(chromium: Any, gatewa
     try:
         _airborne(cloud)
         page.goto(gateway["url"] + "/")
-        page.wait_for_selector('#device-table tr[data-sn="OSDK-SIM-0001"][data-online="true"]', timeout=10000)
+        _device_row(page, gateway, "OSDK-SIM-0001", '[data-online="true"]')
         _sign_in(page)
         page.select_option("#pilot-speed", "3")
         page.click("#pilot-take")
@@ -731,7 +753,7 @@ def test_the_page_sends_no_secret_and_no_outside_request(chromium: Any, gateway:
     page.on("response", on_response)
     try:
         page.goto(gateway["url"] + "/")
-        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=FIRST_DRAW_MS)
+        _device_row(page, gateway, "RM-SIM-0001")
         assert seen and all(u.startswith(gateway["url"]) for u in seen), seen
         assert any(u.endswith("/static/js/app.js") for u in seen)
         assert bodies and not any(TOKEN in b for b in bodies)
@@ -750,7 +772,7 @@ def test_the_page_validates_a_form_before_sending_it(chromium: Any, gateway: dic
     )
     try:
         page.goto(gateway["url"] + "/")
-        page.wait_for_selector('#device-table tr[data-sn="RSDK-SIM-0001"][data-online="true"]', timeout=10000)
+        _device_row(page, gateway, "RSDK-SIM-0001", '[data-online="true"]')
         if page.is_hidden("#signedin"):
             page.fill("#token", TOKEN)
             page.click("#signin button")
@@ -794,7 +816,7 @@ def test_the_frame_inspector_pauses_filters_by_direction_and_resumes(
     page = chromium.new_page()
     try:
         page.goto(gateway["url"] + "/")
-        page.wait_for_selector('#device-table tr[data-sn="RSDK-SIM-0001"][data-online="true"]', timeout=10000)
+        _device_row(page, gateway, "RSDK-SIM-0001", '[data-online="true"]')
         page.select_option("#frame-link", "RSDK-SIM-0001")
         rows = page.locator("#frame-table tbody tr")
         page.wait_for_selector('#frame-table tbody tr[data-dir="rx"]', timeout=10000)
@@ -830,7 +852,7 @@ def test_the_emergency_stop_stays_in_view_wherever_the_page_is_scrolled(
     try:
         page.set_viewport_size({"width": viewport[0], "height": viewport[1]})
         page.goto(gateway["url"] + "/")
-        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=FIRST_DRAW_MS)
+        _device_row(page, gateway, "RM-SIM-0001")
         assert page.evaluate("() => document.documentElement.scrollHeight") > viewport[1]  # it does scroll
         for where in ("document.body.scrollHeight / 2", "document.body.scrollHeight"):
             page.evaluate(f"() => window.scrollTo(0, {where})")
@@ -898,7 +920,7 @@ def test_the_phone_view_does_not_overflow_sideways(chromium: Any, gateway: dict[
             page.set_viewport_size({"width": width, "height": height})
             page.goto(gateway["url"] + "/")
             # (20 s: a page drawn from scratch by a Chromium that shares two cores with the suite)
-            page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=FIRST_DRAW_MS)
+            _device_row(page, gateway, "RM-SIM-0001")
             page.wait_for_selector("#map-svg .aircraft-mark", timeout=20000)
             wide = page.evaluate("() => document.documentElement.scrollWidth")
             assert wide <= width, (width, wide)
@@ -918,7 +940,7 @@ def test_the_tablet_layout_in_portrait_and_landscape(
     page = chromium.new_page()
     try:
         page.goto(gateway["url"] + "/")
-        page.wait_for_selector('#device-table tr[data-sn="RM-SIM-0001"]', timeout=FIRST_DRAW_MS)
+        _device_row(page, gateway, "RM-SIM-0001")
         page.wait_for_selector("#map-svg .aircraft-mark", timeout=10000)
 
         def box(selector: str) -> dict[str, float]:
@@ -977,7 +999,7 @@ def test_the_page_greys_within_3_s_when_the_gateway_goes_away(chromium: Any, gat
     page = chromium.new_page()
     try:
         page.goto(gateway["url"] + "/")
-        page.wait_for_selector('#device-table tr[data-sn="OSDK-SIM-0001"][data-fresh="live"]', timeout=10000)
+        _device_row(page, gateway, "OSDK-SIM-0001", '[data-fresh="live"]')
         assert not page.evaluate("() => document.body.classList.contains('gone')")
         proc.proc.send_signal(signal.SIGSTOP)
         started = time.monotonic()
