@@ -380,6 +380,13 @@ class VideoSettings(BaseModel):
         2.0, gt=0, le=2.5, description="how long live_start_push waits for the first frames before answering"
     )
     stall_timeout: float = Field(5.0, gt=0, description="restart a pipeline without a frame this long")
+    start_timeout: float = Field(
+        20.0,
+        gt=0,
+        description="restart a pipeline with no first frame this long after it started (at least "
+        "stall_timeout; WHIP's publisher starts Python and aiortc, POSTs its offer and connects ICE and DTLS "
+        "first)",
+    )
     backoff_initial: float = Field(0.5, gt=0, description="first restart delay after a failure (doubles)")
     backoff_max: float = Field(10.0, gt=0, description="longest restart delay")
     threads: int = Field(2, ge=1, le=16, description="encoder threads per pipeline (CPU bound)")

@@ -105,6 +105,30 @@ def test_a_stalled_pipeline_is_killed_once_and_retried() -> None:
     assert m.phase is Phase.RETRYING and "no frame" in m.last_reason
 
 
+def test_a_process_has_start_timeout_for_its_first_frame_then_stall_timeout() -> None:
+    """A WHIP publisher's first frame comes after Python, aiortc, the POST, ICE and DTLS (11.8 s once on a
+    loaded CI machine): it is not a stall until ``start_timeout``; after a frame, ``stall_timeout`` again."""
+    clock = ManualClock()
+    m = StreamMachine("SN/0-0-0/normal-0", backoff=Backoff(0.5, 4.0), stall_timeout=3.0, start_timeout=20.0)
+    m.start(T, clock.monotonic(), fail_fast=False)
+    clock.advance(19.9)
+    assert m.tick(clock.monotonic()) == [] and m.phase is Phase.STARTING
+    m.progress(1, 1, clock.monotonic())
+    clock.advance(2.9)
+    assert m.tick(clock.monotonic()) == [] and m.phase is Phase.LIVE
+    clock.advance(0.2)
+    assert m.tick(clock.monotonic()) == [Kill(1)]
+    m.exited(1, clock.monotonic(), "killed")
+    assert m.last_reason == "no frame for 3 s (killed)"
+    clock.advance(1.0)
+    assert m.tick(clock.monotonic()) == [Spawn(2, T)]  # the retry: a new start, its own 20 s
+    clock.advance(20.1)
+    assert m.tick(clock.monotonic()) == [Kill(2)] and m.last_reason == "no frame for 20 s after its start"
+    # a start_timeout below stall_timeout is raised to it
+    low = StreamMachine("v", backoff=Backoff(0.5, 4.0), stall_timeout=5.0, start_timeout=1.0)
+    assert low.start_timeout == 5
+
+
 def test_stop_while_waiting_out_a_backoff() -> None:
     clock = ManualClock()
     m = machine(clock)

@@ -20,8 +20,9 @@ Theory of operation::
   the cloud hears the failure in the reply instead of a retry loop it never asked for. Once a stream has
   been live, a failure is retried for ever, with a backoff of ``initial``·2ⁿ capped at ``maximum``; the
   backoff resets when a stream has stayed live for ``stable_after`` seconds.
-- A stall (no new frame for ``stall_timeout`` while STARTING or LIVE) is a failure too: the machine kills
-  the process and the exit that follows schedules the retry.
+- A stall (no new frame for ``stall_timeout`` while LIVE, or no first frame for ``start_timeout`` after a
+  process starts) is a failure too: the machine kills the process and the exit that follows schedules the
+  retry.
 - ``reconfigure`` (quality, lens) replaces a running pipeline at once: kill the old generation, spawn the
   new one; the stream is not reported as failed.
 """
@@ -81,10 +82,20 @@ class Backoff:
 
 
 class StreamMachine:
-    def __init__(self, video_id: str, *, backoff: Backoff, stall_timeout: float = 5.0) -> None:
+    def __init__(
+        self,
+        video_id: str,
+        *,
+        backoff: Backoff,
+        stall_timeout: float = 5.0,
+        start_timeout: float | None = None,
+    ) -> None:
         self.video_id = video_id
         self.backoff = backoff
         self.stall_timeout = stall_timeout
+        #: how long a process may take to its first frame (None: ``stall_timeout``): a WHIP publisher
+        #: starts Python and aiortc, POSTs its offer and connects ICE and DTLS before its first frame
+        self.start_timeout = stall_timeout if start_timeout is None else max(start_timeout, stall_timeout)
         self.phase = Phase.IDLE
         self.target: Target | None = None
         self.generation = 0
@@ -202,9 +213,12 @@ class StreamMachine:
             self.restarts += 1
             return [self._spawn(now)]
         if self.phase in (Phase.STARTING, Phase.LIVE) and self.running is not None:
-            since = self.last_frame_at if self.last_frame_at is not None else self._spawned_at
-            if now - since >= self.stall_timeout and self._stall_killed != self.running:
-                self.last_reason = f"no frame for {self.stall_timeout:g} s"
+            first = self.last_frame_at is None  # this process has sent nothing yet
+            since = self._spawned_at if first else self.last_frame_at
+            limit = self.start_timeout if first else self.stall_timeout
+            assert since is not None
+            if now - since >= limit and self._stall_killed != self.running:
+                self.last_reason = f"no frame for {limit:g} s" + (" after its start" if first else "")
                 # the exit that follows the kill is this generation's failure: it stays "running" until then
                 self._stall_killed = self.running
                 return [Kill(self.running)]

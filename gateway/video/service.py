@@ -111,7 +111,13 @@ class LiveService:
                     sources.append(pattern)
         self.videos: dict[str, _Video] = {
             s.video_id: _Video(
-                s, StreamMachine(s.video_id, backoff=backoff, stall_timeout=settings.stall_timeout)
+                s,
+                StreamMachine(
+                    s.video_id,
+                    backoff=backoff,
+                    stall_timeout=settings.stall_timeout,
+                    start_timeout=settings.start_timeout,
+                ),
             )
             for s in sources
         }
