@@ -133,6 +133,21 @@ def test_a_lost_peer_connection_restarts_the_publisher_and_status_shows_it(whip:
     wait_until(lambda: rx.sessions[-1].deleted, 3, what="the new session's DELETE")
 
 
+def test_a_quality_change_republishes_at_the_new_size_and_ends_the_old_session(whip: _Whip) -> None:
+    """``live_set_quality`` replaces the pipeline: for WHIP a new offer (a new session at the endpoint, the
+    picture at DJI's size for the quality) and the old session DELETEd, not left to time out."""
+    rx, rig = whip.rx, whip.rig
+    assert result(whip.start("quality")) == 0
+    wait_until(lambda: rx.last is not None and rx.last.frames >= 15, 30, what="frames at quality 0")
+    old = rx.last
+    assert old is not None and old.sizes == {(1280, 720)}
+    reply = rig.cloud.service("live_set_quality", {"video_id": GIMBAL_VIDEO, "video_quality": 1})
+    assert result(reply) == 0
+    wait_until(lambda: rx.last is not old and rx.last.frames >= 15, 30, what="frames at quality 1")
+    assert rx.last is not None and rx.last.sizes == {(960, 540)}, rx.last
+    wait_until(lambda: old.deleted and old.ended_at is not None, 5, what="the old session's DELETE")
+
+
 @pytest.mark.browser
 def test_chromium_as_the_endpoint_decodes_what_the_publisher_sends(whip: _Whip) -> None:
     """Fidelity: the endpoint above is aiortc, the publisher's own library; here the peer is Debian's
