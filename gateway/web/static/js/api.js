@@ -28,8 +28,12 @@ async function parse(response) {
   return body;
 }
 
+//: a request the gateway has not answered in this long is given up (the page's start retries): a start
+//: waiting for ever on one lost response left a page "connecting" with no rows (seen in a loaded CI run)
+const GET_TIMEOUT_MS = 8000;
+
 export async function get(path) {
-  return parse(await fetch(path, { credentials: "same-origin", cache: "no-store" }));
+  return parse(await fetch(path, { credentials: "same-origin", cache: "no-store", signal: AbortSignal.timeout(GET_TIMEOUT_MS) }));
 }
 
 export async function send(method, path, body) {

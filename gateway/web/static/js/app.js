@@ -95,6 +95,8 @@ function connect() {
   const url = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/api/ws`;
   const ws = new WebSocket(url);
   ctx.ws = ws;
+  // a socket that has not opened in 8 s is closed: its onclose retries (never "connecting" for ever)
+  setTimeout(() => { if (ws.readyState === 0) ws.close(); }, 8000);
   const pill = $("#link-state");
   ws.onopen = () => {
     ctx.retry = 500;
